@@ -1,0 +1,45 @@
+# pattern_locator: `make demo` and `make test` work on a fresh machine with
+# Python 3.12 and the package registries. Everything goes into .venv.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+# Localhost-only DDS discovery (this network forbids multicast out of the
+# machine), the venv on the ament index, and one ROS domain per invocation.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
+export PYTHONDONTWRITEBYTECODE := 1
+ROS_DOMAIN_ID ?= $(shell echo $$(( ($$$$ % 100) + 101 )))
+export ROS_DOMAIN_ID
+
+.PHONY: all venv demo test lint bench cards clean
+
+all: test
+
+$(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg package.xml
+	@py312=$$(tools/find_python312.sh) || exit 1; \
+	  if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))'; then \
+	    rm -rf $(VENV) && $$py312 -m venv $(VENV); fi
+	$(PY) -m pip install --quiet --disable-pip-version-check --upgrade pip
+	$(PY) -m pip install --quiet --disable-pip-version-check \
+	  -r requirements.txt -r requirements-dev.txt
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $@
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/pattern-locator demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q test
+
+lint: $(STAMP)
+	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py
+
+bench: $(STAMP)
+	$(VENV)/bin/pattern-locator bench
+
+clean:
+	rm -rf $(VENV) build install log *.egg-info .pytest_cache

@@ -1,4 +1,5 @@
-"""Camera intrinsics: the ROS camera-info model, loaded from its standard YAML.
+"""
+Camera intrinsics: the ROS camera-info model, loaded from its standard YAML.
 
 Pixels follow OpenCV: the optical frame is x right, y down, z forward, and
 pixel (u, v) = (fx * x' + cx, fy * y' + cy) with (x', y') the distorted
@@ -98,7 +99,7 @@ class CameraModel:
             out = cv2.fisheye.undistortPoints(px, self.K, self._cv_dist())
         else:
             criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
-            out = cv2.undistortPointsIter(px, self.K, self._cv_dist(), None, None, criteria)
+            out = cv2.undistortPoints(px, self.K, self._cv_dist(), None, None, None, criteria)
         return out.reshape(-1, 2)
 
     def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
@@ -107,7 +108,7 @@ class CameraModel:
         return n * [self.fx, self.fy] + [self.cx, self.cy]
 
     def scaled(self, factor: float) -> 'CameraModel':
-        """The same camera at ``factor`` times the resolution (binning/decimation)."""
+        """Return this camera at ``factor`` times the resolution (binning/decimation)."""
         K = self.K.copy()
         K[:2] *= factor
         return CameraModel(int(round(self.width * factor)), int(round(self.height * factor)),
@@ -133,7 +134,7 @@ class CameraModel:
                            'plumb_bob', name)
 
     def to_yaml_dict(self) -> dict:
-        """The standard ROS camera-info YAML content."""
+        """Return the standard ROS camera-info YAML content."""
         P = np.zeros((3, 4))
         P[:3, :3] = self.K
         return {
@@ -165,7 +166,7 @@ def _matrix(data: dict, key: str, source: str, rows: int, cols: Optional[int]) -
 
 
 def camera_from_dict(data: dict, source: str = 'camera') -> CameraModel:
-    """A CameraModel from a parsed ROS camera-info YAML; CameraError names the problem."""
+    """Build a CameraModel from a parsed ROS camera-info YAML; CameraError names the problem."""
     if not isinstance(data, dict):
         raise CameraError(f'{source}: not a camera-info YAML (expected a mapping)')
     for key in ('image_width', 'image_height', 'camera_matrix'):

@@ -1,4 +1,5 @@
-"""The package's own exception types.
+"""
+The package's own exception types.
 
 Every error a user can cause (a bad file, a bad id, a bad image) is one of
 these, with a message that names the bad part, so nodes can log it and the

@@ -1,4 +1,5 @@
-"""Rigid transforms and rotation helpers shared by the estimators and tools.
+"""
+Rigid transforms and rotation helpers shared by the estimators and tools.
 
 Convention: ``Pose(R, t)`` maps points of a *child* frame into a *parent*
 frame, ``X_parent = R @ X_child + t``. ``T_camera_pattern`` therefore maps
@@ -93,7 +94,8 @@ def rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0),
             roll: float = 0.0) -> Pose:
-    """Camera pose ``T_world_camera`` (optical frame) at ``eye`` looking at ``target``.
+    """
+    Camera pose ``T_world_camera`` (optical frame) at ``eye`` looking at ``target``.
 
     The optical frame is x right, y down, z forward; ``up`` is the world
     direction that appears upwards in the image (before ``roll``, radians,
@@ -119,7 +121,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0
 
 
 def quaternion_xyzw(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) of a rotation matrix, w >= 0."""
+    """Return the unit quaternion (x, y, z, w) of a rotation matrix, w >= 0."""
     R = np.asarray(R, dtype=float)
     tr = np.trace(R)
     if tr > 0.0:

@@ -1,4 +1,5 @@
-"""The colour-dot card: its geometry, its colour code and their configuration.
+"""
+The colour-dot card: its geometry, its colour code and their configuration.
 
 Pattern frame (method.md section 1): origin at the centre dot, x right, y up
 (towards point 1), z out of the wall. Ring point ``k`` (1..8) sits at
@@ -99,7 +100,7 @@ class PatternConfig:
     ring_dot_radius: float = 0.014
     centre_dot_radius: float = 0.024
     colours_rgb: Tuple[Tuple[str, Tuple[int, int, int]], ...] = (
-        ('K', (0, 0, 0)), ('R', (224, 16, 26)), ('G', (16, 160, 64)), ('B', (16, 64, 208)))
+        ('K', (0, 0, 0)), ('R', (224, 16, 26)), ('G', (32, 176, 80)), ('B', (16, 64, 208)))
     ring_digits: Tuple[Tuple[str, int], ...] = (('R', 0), ('G', 1), ('B', 2))
     centre_digits: Tuple[Tuple[str, int], ...] = (('K', 0), ('R', 1), ('G', 2), ('B', 3))
     fields: Tuple[CodeField, ...] = (

@@ -1,4 +1,5 @@
-"""Where the package's shipped files (config/) are found.
+"""
+Where the package's shipped files (config/) are found.
 
 In a source checkout (or an editable install) they sit beside the package;
 after ``colcon build`` they live in the package's share directory on the

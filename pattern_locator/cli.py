@@ -1,0 +1,224 @@
+"""
+The ``pattern-locator`` command line: make-pattern, detect, bench, demo.
+
+Errors a user can cause end as one readable line on stderr and exit status 2.
+"""
+
+import argparse
+import json
+import math
+from pathlib import Path
+import sys
+import time
+from typing import List, Optional, Sequence
+
+import cv2
+import numpy as np
+
+from .errors import PatternLocatorError
+from .locate import CardLocator, ESTIMATORS, LocatedCard
+from .pattern import load_pattern_config
+
+PROG = 'pattern-locator'
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, 'handler', None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.handler(args) or 0)
+    except PatternLocatorError as exc:
+        _error(str(exc))
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+def _error(message: str) -> None:
+    print(f'{PROG}: error: {message}', file=sys.stderr)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog=PROG, description='Locate a camera from printed colour-dot cards.')
+    sub = parser.add_subparsers(title='commands')
+
+    make = sub.add_parser('make-pattern', help='print a card (SVG, PDF or PNG)',
+                          description='Write a printable card at true millimetre scale.')
+    make.add_argument('--floor', type=int, required=True)
+    make.add_argument('--room', type=int, required=True)
+    make.add_argument('--pattern', type=int, required=True, help='card number in the room')
+    make.add_argument('-o', '--output', required=True,
+                      help='output file; the suffix (.svg, .pdf, .png) picks the format')
+    make.add_argument('--paper', default='a3', choices=('a3', 'tabloid', 'a4', 'letter'),
+                      help='sheet size; a4 and letter tile the card over several sheets '
+                           '(default: a3)')
+    make.add_argument('--dpi', type=float, default=300.0, help='PNG resolution (default 300)')
+    make.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
+    make.set_defaults(handler=_make_pattern)
+
+    detect = sub.add_parser('detect', help='find cards in images and locate the camera',
+                            description='Detect cards and estimate the camera pose.')
+    detect.add_argument('images', nargs='+', metavar='IMAGE')
+    detect.add_argument('--camera', required=True, help='ROS camera-info YAML')
+    detect.add_argument('--estimator', choices=ESTIMATORS, default='exact')
+    detect.add_argument('--min-tilt', type=float, default=0.0, metavar='DEG',
+                        help="reject views tilted less than this (the paper's rule: 25)")
+    detect.add_argument('--json', action='store_true', help='one JSON object per image')
+    detect.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
+    detect.set_defaults(handler=_detect)
+
+    bench = sub.add_parser('bench', help='accuracy and speed against AprilTag and ArUco',
+                           description='Render seeded scenes and compare with AprilTag '
+                                       'and ArUco, printing tables.')
+    bench.add_argument('--scenes', type=int, default=40,
+                       help='scenes per distance bin and camera (default 40)')
+    bench.add_argument('--seed', type=int, default=1)
+    bench.add_argument('--quick', action='store_true', help='a small run for smoke tests')
+    bench.set_defaults(handler=_bench)
+
+    demo = sub.add_parser('demo', help="the paper's 30-image route through a room",
+                          description="Locate the camera along the paper's route and print "
+                                      'the errors in the form of its Table 1.')
+    demo.add_argument('--estimator', choices=ESTIMATORS, default='exact')
+    demo.add_argument('--seed', type=int, default=7)
+    demo.add_argument('--output-dir', default='out', help='where the plot goes (default out/)')
+    demo.set_defaults(handler=_demo)
+    return parser
+
+
+# make-pattern ----------------------------------------------------------------
+
+def _make_pattern(args: argparse.Namespace) -> int:
+    from .pattern import Ids
+    from .printable import write_card
+    cfg = load_pattern_config(args.pattern_config)
+    code = cfg.encode(args.floor, args.room, args.pattern)
+    written = write_card(args.output, cfg, Ids(args.floor, args.room, args.pattern),
+                         paper=args.paper, dpi=args.dpi)
+    for path in written:
+        print(path)
+    print(f'floor {args.floor} room {args.room} card {args.pattern}: code {code}',
+          file=sys.stderr)
+    return 0
+
+
+# detect ------------------------------------------------------------------------
+
+def _detect(args: argparse.Namespace) -> int:
+    from .camera import load_camera
+    cfg = load_pattern_config(args.pattern_config)
+    camera = load_camera(args.camera)
+    locator = CardLocator(cfg, estimator=args.estimator, min_tilt_deg=args.min_tilt)
+    status = 0
+    for name in args.images:
+        image = _read_image(name)
+        if isinstance(image, str):
+            _error(image)
+            status = 2
+            continue
+        if image.shape[1] != camera.width or image.shape[0] != camera.height:
+            _error(f'{name}: image is {image.shape[1]}x{image.shape[0]} but the camera file '
+                   f'is for {camera.width}x{camera.height}')
+            status = 2
+            continue
+        start = time.perf_counter()
+        located = locator.locate(image, camera)
+        elapsed_ms = (time.perf_counter() - start) * 1000.0
+        if args.json:
+            print(json.dumps({'image': name, 'time_ms': round(elapsed_ms, 3),
+                              'patterns': [card_json(c) for c in located]}))
+        else:
+            _print_text(name, elapsed_ms, located)
+    return status
+
+
+def _read_image(name: str):
+    path = Path(name)
+    if not path.is_file():
+        return f'{name}: no such image file'
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        return f'{name}: cannot decode image (not a PNG/JPEG/... file, or corrupt)'
+    return image
+
+
+def _rounded(values, digits: int) -> List:
+    return np.round(np.asarray(values, dtype=float), digits).tolist()
+
+
+def card_json(card: LocatedCard) -> dict:
+    """Return the JSON form of one located card (``detect --json``)."""
+    det = card.detection
+    points = [None if np.isnan(p[0]) else _rounded(p, 3) for p in det.points_px]
+    out = {
+        'code': str(det.code) if det.code is not None else None,
+        'floor': det.ids.floor if det.ids else None,
+        'room': det.ids.room if det.ids else None,
+        'pattern': det.ids.pattern if det.ids else None,
+        'points_px': points,
+        'estimator': card.estimator,
+        'T_camera_pattern': None,
+        'camera_in_pattern_m': None,
+        'covariance': None,
+        'reprojection_rms_px': None,
+        'ambiguity': None,
+        'psi_deg': None, 'phi_deg': None, 'theta_deg': None, 'distance_m': None,
+    }
+    if card.T_camera_pattern is not None:
+        out.update({
+            'T_camera_pattern': _rounded(card.T_camera_pattern.matrix(), 7),
+            'camera_in_pattern_m': _rounded(card.camera_in_pattern, 5),
+            'reprojection_rms_px': round(float(card.reprojection_rms_px), 4),
+            'psi_deg': round(card.psi_deg, 3), 'phi_deg': round(card.phi_deg, 3),
+            'theta_deg': round(card.theta_deg, 3), 'distance_m': round(card.distance_m, 5),
+        })
+        if card.covariance is not None:
+            out['covariance'] = [[float(f'{v:.4g}') for v in row] for row in card.covariance]
+        if card.ambiguity is not None and math.isfinite(card.ambiguity):
+            out['ambiguity'] = round(float(card.ambiguity), 3)
+    else:
+        out['problem'] = card.problem
+    return out
+
+
+def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> None:
+    print(f'{name}: {len(located)} card(s) in {elapsed_ms:.1f} ms')
+    for card in located:
+        det = card.detection
+        ids = (f'floor {det.ids.floor} room {det.ids.room} card {det.ids.pattern}'
+               if det.ids else 'no code (grey image)')
+        print(f'  {det.code}  {ids}  ({det.n_points} dots)')
+        if card.T_camera_pattern is None:
+            print(f'    no pose: {card.problem}')
+            continue
+        x, y, z = card.camera_in_pattern
+        print(f'    camera in card frame: x {x:+.3f} y {y:+.3f} z {z:+.3f} m   '
+              f'D {card.distance_m:.3f} m  phi {card.phi_deg:.2f}  theta {card.theta_deg:.2f}  '
+              f'psi {card.psi_deg:.2f} deg')
+        extra = f'    reprojection {card.reprojection_rms_px:.3f} px'
+        if card.covariance is not None:
+            sd = np.sqrt(np.diag(card.covariance)[:3]) * 1000.0
+            extra += f'   position sd {sd[0]:.1f} {sd[1]:.1f} {sd[2]:.1f} mm'
+        if card.ambiguity is not None and math.isfinite(card.ambiguity):
+            extra += f'   ambiguity {card.ambiguity:.2f}'
+        print(extra)
+
+
+# bench and demo ---------------------------------------------------------------------
+
+def _bench(args: argparse.Namespace) -> int:
+    from .bench import run_bench
+    return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from .demo import run_demo
+    return run_demo(estimator=args.estimator, seed=args.seed, output_dir=args.output_dir)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

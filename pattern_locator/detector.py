@@ -1,0 +1,577 @@
+"""
+Find colour-dot cards in a BGR image: dots -> cards -> ordered points -> code.
+
+The steps, each cheap enough for full frame rate:
+
+1. **Dots.** Every dot, black or coloured, is dark in at least one channel
+   against the white card, whatever the light's colour, so the per-pixel
+   minimum over B, G, R is thresholded against the local white (a max
+   filter on a decimated image). Connected components with their moments
+   give blobs with a centroid and an equivalent ellipse.
+2. **Cards.** A card is a centre blob with two rings of 8 blobs around it.
+   The centre blob's own ellipse gives the local affine shape of the card;
+   in that normalised frame the rings are near circles of radii
+   ``R / r_centre`` at 45 degree steps. A vote over neighbours finds the
+   scale and the angle of the slots; a homography fitted to the assigned
+   dots (in undistorted coordinates when the camera is known) verifies the
+   card and recovers dots the first pass missed.
+3. **Order and code.** Colours are read against the card's own white
+   (sampled between the dots, which cancels the light's colour) and the
+   card's black point 1; exactly one black point per ring marks point 1,
+   and points follow clockwise as seen from the front (a card is never
+   seen from behind). Both rings must agree; a card whose colours are not
+   clear is rejected, never guessed.
+4. **Sub-pixel centres.** Darkness-weighted centroids over each dot's
+   neighbourhood: the centre of the dot's image ellipse, which the exact
+   estimator corrects to the projected circle centre.
+"""
+
+from dataclasses import dataclass, field
+import logging
+from typing import List, Optional, Tuple
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel
+from .errors import CodeError, ImageError
+from .pattern import Code, Ids, PatternConfig, RING_POINTS
+
+LOG = logging.getLogger(__name__)
+
+_CHANNEL_COLOUR = 'BGR'  # OpenCV channel order: index of the channel -> colour letter
+
+
+@dataclass(frozen=True)
+class DetectorParams:
+    """Tuning of the detector; the defaults suit 640x480 to 1920x1080 cameras."""
+
+    dark_ratio: float = 0.72        # dot pixel: min channel below this fraction of local white
+    min_white: int = 30             # ignore regions whose local white is darker than this
+    white_window: int = 48          # local white: max filter over about this many pixels
+    min_dot_area: int = 3           # pixels
+    max_dot_area_fraction: float = 0.05   # of the image
+    min_ellipse_fill: float = 0.55  # blob area / area of its moment ellipse (convex, round)
+    max_homography_error: float = 0.35    # in units of the dot's image radius
+    gamma: float = 2.2              # the camera's encoding; colours are compared in linear light
+    black_ratio: float = 0.82       # linear darkness min/max over channels above this -> black
+    colour_ratio: float = 0.75      # ...below this -> chromatic; between: unclear, reject
+    min_darkness: float = 0.25      # a dot darker than the card by less than this is unreadable
+
+
+@dataclass(frozen=True)
+class CardDetection:
+    """
+    One card found in an image.
+
+    ``points_px`` holds the sub-pixel dot centres in dot-index order
+    (0 = centre, then ring 0 points 1..8, ring 1 points 1..8), NaN where a
+    dot was not seen. ``code`` and ``ids`` are None for a grey image, where
+    the ring order (point 1) is unknown too.
+    """
+
+    code: Optional[Code]
+    ids: Optional[Ids]
+    points_px: np.ndarray
+    dot_areas_px: np.ndarray
+    complete_rings: Tuple[int, ...]
+    size_px: float                  # long semi-axis of the outermost complete ring, pixels
+    homography: np.ndarray          # pattern plane (metres) -> undistorted pixels
+    colour_margin: float            # how clearly the colours were read, 0..1
+    ring_codes: Tuple[str, ...] = field(default=())   # per ring, the colours read
+
+    @property
+    def centre_px(self) -> np.ndarray:
+        return self.points_px[0]
+
+    @property
+    def n_points(self) -> int:
+        return int(np.count_nonzero(~np.isnan(self.points_px[:, 0])))
+
+
+class Detector:
+    """Detect colour-dot cards; one instance per pattern configuration."""
+
+    def __init__(self, config: PatternConfig, params: DetectorParams = DetectorParams()):
+        self.config = config
+        self.params = params
+        self._model = config.model_points()[:, :2]
+        self._radii = config.dot_radii()
+        # Expected ring radii in units of the centre dot radius.
+        self._ring_rho = np.array(config.ring_radii) / config.centre_dot_radius
+        self._white_xy = _white_sample_points(config)
+
+    # Public ----------------------------------------------------------------
+
+    def detect(self, image: np.ndarray, camera: Optional[CameraModel] = None
+               ) -> List[CardDetection]:
+        """Every card in ``image`` (BGR uint8, or grey for geometry only)."""
+        frame = self._segment(_check_image(image), camera)
+        cards = []
+        used = set()
+        for centre in self._centre_candidates(frame):
+            if centre in used:
+                continue
+            found = self._card_at(frame, centre)
+            if found is None:
+                continue
+            card, members = found
+            if members & used:
+                continue
+            used |= members
+            cards.append(card)
+        return cards
+
+    # Dots ------------------------------------------------------------------
+
+    def _segment(self, image: np.ndarray, camera: Optional[CameraModel]) -> '_Frame':
+        """Dark blobs against the local white, as connected components."""
+        p = self.params
+        darkest = image if image.ndim == 2 else _min_channel(image)
+        h, w = darkest.shape
+        # Local white: max filter on a 4x decimated image, smoothed, scaled up.
+        step = 4
+        small = cv2.resize(darkest, (max(1, w // step), max(1, h // step)),
+                           interpolation=cv2.INTER_AREA)
+        k = max(3, int(p.white_window // step) | 1)
+        small = cv2.dilate(small, cv2.getStructuringElement(cv2.MORPH_RECT, (k, k)))
+        small = cv2.blur(small, (3, 3))
+        threshold = np.where(small >= p.min_white, small * p.dark_ratio, 0).astype(np.uint8)
+        threshold = cv2.resize(threshold, (w, h), interpolation=cv2.INTER_LINEAR)
+        mask = cv2.compare(darkest, threshold, cv2.CMP_LT)
+        n, labels, stats, centroids = cv2.connectedComponentsWithStats(
+            mask, connectivity=8, ltype=cv2.CV_32S)
+        area = stats[:, cv2.CC_STAT_AREA]
+        bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+        # Round dots fill a good part of their box and are not long and thin
+        # (a 75-degree tilt makes a dot about 4:1).
+        keep = ((area >= p.min_dot_area) & (area <= p.max_dot_area_fraction * h * w)
+                & (area * 4 >= bw * bh) & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2))
+        keep[0] = False
+        idx = np.flatnonzero(keep)
+        return _Frame(image, darkest, small, step, labels, camera, image.ndim == 2,
+                      centroids[idx, 0].copy(), centroids[idx, 1].copy(),
+                      area[idx].astype(float), stats[idx, :4].copy(), idx.astype(np.int32))
+
+    # Cards -----------------------------------------------------------------
+
+    def _centre_candidates(self, frame: '_Frame') -> List[int]:
+        """Blobs with enough plausible ring dots around them, biggest first."""
+        n = len(frame.area)
+        if n < 1 + RING_POINTS:
+            return []
+        # A centre dot of equivalent radius r has its outer ring within
+        # about rho_out * r / cos(tilt) of it; 2x covers tilts to 75 degrees.
+        radius = 2.0 * self._ring_rho[0] * np.sqrt(frame.area / np.pi)
+        du = frame.u[None, :] - frame.u[:, None]
+        dv = frame.v[None, :] - frame.v[:, None]
+        ratio = frame.area[None, :] / frame.area[:, None]
+        close = ((du * du + dv * dv < (radius * radius)[:, None])
+                 & (ratio > 0.04) & (ratio < 1.2))
+        np.fill_diagonal(close, False)
+        count = close.sum(axis=1)
+        candidates = np.flatnonzero(count >= RING_POINTS)
+        return [int(i) for i in candidates[np.argsort(-frame.area[candidates])]]
+
+    def _card_at(self, frame: '_Frame', ci: int):
+        # Normalising map: the centre blob's ellipse -> unit circle (radius = centre dot).
+        cov = frame.covariance(ci)
+        evals, evecs = np.linalg.eigh(cov)
+        if evals[0] <= 0:
+            return None
+        semi = 2.0 * np.sqrt(evals)                 # semi-axes of the centre dot, px
+        if semi[0] < 0.8:
+            return None
+        fill = frame.area[ci] / (np.pi * semi[0] * semi[1])
+        if not self.params.min_ellipse_fill <= fill <= 1.3:
+            return None
+        to_unit = evecs @ np.diag(1.0 / semi) @ evecs.T
+        rel = np.column_stack([frame.u - frame.u[ci], frame.v - frame.v[ci]]) @ to_unit.T
+        rho = np.hypot(rel[:, 0], rel[:, 1])
+        r_out = self._ring_rho[0]
+        r_in = self._ring_rho[-1]
+        ratio = frame.area / frame.area[ci]
+        near = np.flatnonzero((rho > 0.55 * r_in) & (rho < 1.6 * r_out)
+                              & (ratio < 1.2) & (ratio > 0.04))
+        near = near[near != ci]
+        if len(near) < RING_POINTS:
+            return None
+        rho = rho[near]
+        ang = np.arctan2(rel[near, 1], rel[near, 0])
+        slots = self._vote_slots(rho, ang)
+        if slots is None:
+            return None
+        scale, phase = slots
+        # Assign each neighbour to (ring, slot) by its predicted position.
+        n_rings = len(self._ring_rho)
+        k = np.round(_wrap(ang - phase) / (np.pi / 4)).astype(int) % RING_POINTS
+        dang = np.abs(_wrap(ang - (phase + k * np.pi / 4)))
+        slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
+        best_cost = np.full((n_rings, RING_POINTS), np.inf)
+        for ring, r_model in enumerate(self._ring_rho):
+            r_exp = scale * r_model
+            dr = np.abs(rho / r_exp - 1.0)
+            ok = (dr < 0.2) & (dang < 0.3)
+            for i in np.flatnonzero(ok):
+                cost = dr[i] + dang[i]
+                if cost < best_cost[ring, k[i]]:
+                    best_cost[ring, k[i]] = cost
+                    slot_blob[ring, k[i]] = near[i]
+        if not np.any(np.all(slot_blob >= 0, axis=1)):
+            return None
+        # Slot order k increases clockwise in the image (v down) = clockwise on the card
+        # seen from the front; point 1 is found from the colours below.
+        return self._verify_and_read(frame, ci, slot_blob)
+
+    def _vote_slots(self, rho: np.ndarray, ang: np.ndarray) -> Optional[Tuple[float, float]]:
+        """
+        Scale of the rings and angle of slot 0, by voting over neighbours.
+
+        Every neighbour, taken as a dot of every ring, proposes a scale and a
+        slot angle; the proposal that puts most neighbours on a ring and a
+        45-degree slot wins.
+        """
+        ring_rho = self._ring_rho
+        scale = (rho[:, None] / ring_rho[None, :]).ravel()          # (A,)
+        phase = np.repeat(ang, len(ring_rho))                          # (A,)
+        ok_scale = (scale > 0.55) & (scale < 1.6)
+        if not np.any(ok_scale):
+            return None
+        scale, phase = scale[ok_scale], phase[ok_scale]
+        dang = _wrap(ang[None, :] - phase[:, None])                     # (A, N)
+        dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
+        r_exp = scale[:, None, None] * ring_rho[None, None, :]          # (A, 1, R)
+        on_ring = np.abs(rho[None, :, None] - r_exp) < 0.2 * r_exp      # (A, N, R)
+        score = np.count_nonzero(on_ring.any(axis=2) & (dslot < 0.3), axis=1)
+        best = int(np.argmax(score))
+        if score[best] < RING_POINTS:
+            return None
+        return float(scale[best]), float(phase[best])
+
+    def _verify_and_read(self, frame: '_Frame', ci: int, slot_blob: np.ndarray):
+        cfg = self.config
+        n_rings = slot_blob.shape[0]
+        camera = frame.camera
+        # Sub-pixel centres of the assigned dots.
+        centres = {j: frame.centroid(j) for j in {ci} | set(slot_blob[slot_blob >= 0].tolist())}
+        # Homography from slot-ordered model points (slot 0 taken as point 1 until
+        # the colours say which is) to undistorted pixels, to verify the geometry.
+        pos = [(ring, k) for ring in range(n_rings) for k in range(RING_POINTS)
+               if slot_blob[ring, k] >= 0]
+        obj = np.array([self._model[cfg.dot_index(ring, k + 1)] for ring, k in pos]
+                       + [self._model[0]])
+        img = np.array([centres[slot_blob[ring, k]] for ring, k in pos] + [centres[ci]])
+        und = camera.undistort_pixels(img) if camera is not None else img
+        H, inliers = self._fit_homography(obj, und)
+        if H is None:
+            return None
+        for (ring, k), ok in zip(pos, inliers[:-1]):
+            if not ok:
+                slot_blob[ring, k] = -1
+        # Look again for missing dots where the homography puts them.
+        self._fill_missing(frame, H, slot_blob, ci)
+        for j in set(slot_blob[slot_blob >= 0].tolist()) - set(centres):
+            centres[j] = frame.centroid(j)
+        complete = [ring for ring in range(n_rings) if np.all(slot_blob[ring] >= 0)]
+        if not complete:
+            return None
+        if frame.grey_only:
+            point1_slot, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
+        else:
+            read = self._read_colours(frame, H, slot_blob, ci)
+            if read is None:
+                return None
+            point1_slot, code, margin, ring_codes = read
+            try:
+                ids = cfg.decode(code)
+            except CodeError:
+                return None
+        points = np.full((cfg.n_dots, 2), np.nan)
+        areas = np.full(cfg.n_dots, np.nan)
+        points[0] = centres[ci]
+        areas[0] = frame.area[ci]
+        for ring in range(n_rings):
+            for k in range(RING_POINTS):
+                j = slot_blob[ring, k]
+                if j >= 0:
+                    d = cfg.dot_index(ring, (k - point1_slot) % RING_POINTS + 1)
+                    points[d] = centres[j]
+                    areas[d] = frame.area[j]
+        # Homography in final dot order (point 1 up) for the callers.
+        H_final = H @ _rotation_about_z(point1_slot * np.pi / 4)
+        outer = complete[0]
+        ring_px = points[[cfg.dot_index(outer, k) for k in range(1, RING_POINTS + 1)]]
+        size = 0.5 * float(np.max(np.linalg.norm(ring_px[:, None] - ring_px[None], axis=2)))
+        card = CardDetection(code, ids, points, areas, tuple(complete), size, H_final,
+                             float(margin), tuple(ring_codes))
+        return card, {ci} | set(slot_blob[slot_blob >= 0].tolist())
+
+    def _fit_homography(self, obj: np.ndarray, img: np.ndarray):
+        """Homography with outlier rejection; the centre (last point) must be an inlier."""
+        if len(obj) < 6:
+            return None, None
+        tol_radius = np.full(len(obj), self.config.ring_dot_radius)
+        tol_radius[-1] = self.config.centre_dot_radius
+        inliers = np.ones(len(obj), dtype=bool)
+        for _ in range(3):
+            H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
+            if H is None:
+                return None, None
+            err = np.linalg.norm(_apply_h(H, obj) - img, axis=1)
+            # Tolerance relative to each dot's image radius.
+            tol = np.maximum(self.params.max_homography_error * _h_scale(H, obj) * tol_radius,
+                             0.75)
+            now = err < tol
+            if np.count_nonzero(now) < 6 or not now[-1]:
+                return None, None
+            if np.array_equal(now, inliers):
+                break
+            inliers = now
+        return H, inliers
+
+    def _fill_missing(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray,
+                      ci: int) -> None:
+        """Assign blobs found where the homography predicts a missing dot (in place)."""
+        missing = np.argwhere(slot_blob < 0)
+        if len(missing) == 0:
+            return
+        used = set(slot_blob[slot_blob >= 0].tolist()) | {ci}
+        positions = np.column_stack([frame.u, frame.v])
+        model = np.array([self._model[self.config.dot_index(int(r), int(k) + 1)]
+                          for r, k in missing])
+        pred = _apply_h(H, model)
+        if frame.camera is not None:
+            pred = _distort_pixels(frame.camera, pred)
+        tol = np.maximum(0.75, self.params.max_homography_error * _h_scale(H, model)
+                         * self.config.ring_dot_radius)
+        for (ring, k), p, t in zip(missing, pred, tol):
+            d = np.hypot(positions[:, 0] - p[0], positions[:, 1] - p[1])
+            j = int(np.argmin(d))
+            if d[j] < t and j not in used:
+                slot_blob[ring, k] = j
+                used.add(j)
+
+    # Colours ---------------------------------------------------------------
+
+    def _read_colours(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray, ci: int):
+        ref_white = self._card_white(frame, H)
+        if ref_white is None:
+            return None
+        n_rings = slot_blob.shape[0]
+        colours = np.full((n_rings, RING_POINTS), '', dtype=object)
+        margins = []
+        for ring in range(n_rings):
+            for k in range(RING_POINTS):
+                j = slot_blob[ring, k]
+                if j < 0:
+                    continue
+                letter, margin = self._classify(self._dot_darkness(frame, j, ref_white))
+                if letter is None:
+                    return None
+                colours[ring, k] = letter
+                margins.append(margin)
+        centre_letter, margin = self._classify(self._dot_darkness(frame, ci, ref_white))
+        if centre_letter is None:
+            return None
+        margins.append(margin)
+        # Point 1: the one black slot, the same in every ring that shows it.
+        point1 = None
+        for ring in range(n_rings):
+            blacks = [k for k in range(RING_POINTS) if colours[ring, k] == 'K']
+            if len(blacks) > 1:
+                return None
+            if blacks:
+                if point1 is not None and blacks[0] != point1:
+                    return None
+                point1 = blacks[0]
+        if point1 is None:
+            return None
+        ring_codes = []
+        agreed = [''] * RING_POINTS
+        for ring in range(n_rings):
+            seq = [colours[ring, (point1 + i) % RING_POINTS] for i in range(RING_POINTS)]
+            ring_codes.append(''.join(c if c else '?' for c in seq))
+            for i, c in enumerate(seq):
+                if not c:
+                    continue
+                if agreed[i] and agreed[i] != c:
+                    return None          # the rings disagree: never guess
+                agreed[i] = c
+        if not all(agreed):
+            return None
+        try:
+            code = Code.parse(f'{centre_letter}-{"".join(agreed)}')
+        except CodeError:
+            return None
+        return point1, code, float(min(margins)), ring_codes
+
+    def _card_white(self, frame: '_Frame', H: np.ndarray) -> Optional[np.ndarray]:
+        """Median colour of the card's paper at points between the dots."""
+        pts = _apply_h(H, self._white_xy)
+        if frame.camera is not None:
+            pts = _distort_pixels(frame.camera, pts)
+        h, w = frame.image.shape[:2]
+        inside = (pts[:, 0] >= 1) & (pts[:, 0] < w - 1) & (pts[:, 1] >= 1) & (pts[:, 1] < h - 1)
+        pts = pts[inside]
+        if len(pts) < 4:
+            return None
+        xs = np.round(pts[:, 0]).astype(int)
+        ys = np.round(pts[:, 1]).astype(int)
+        white = np.median(frame.image[ys, xs].astype(np.float32), axis=0)
+        if np.max(white) < self.params.min_white:
+            return None
+        return np.maximum(white, 1.0)
+
+    def _dot_darkness(self, frame: '_Frame', j: int, ref_white: np.ndarray) -> np.ndarray:
+        """Per-channel darkness (1 - colour / white, linear light) of the dot's core."""
+        x, y, w, h = frame.box[j]
+        own = frame.labels[y:y + h, x:x + w] == frame.label[j]
+        pix = frame.image[y:y + h, x:x + w][own].astype(np.float32)
+        if len(pix) == 0:
+            return np.zeros(3)
+        # In linear light a blurred dot is a mix of ink and paper, so the ratios
+        # between channels of its darkness do not depend on its size or blur.
+        linear = np.clip(pix / ref_white, 0.0, 1.0) ** self.params.gamma
+        dark = 1.0 - linear
+        # The core: the darker pixels (blur mixes the rim with paper).
+        strength = dark.max(axis=1)
+        core = strength >= 0.5 * (strength.max() + strength.min())
+        return dark[core].mean(axis=0)
+
+    def _classify(self, darkness: np.ndarray) -> Tuple[Optional[str], float]:
+        """Colour letter from per-channel darkness (B, G, R order), and a margin."""
+        p = self.params
+        top = float(darkness.max())
+        if top < p.min_darkness:
+            return None, 0.0
+        ratio = float(darkness.min()) / top
+        if ratio >= p.black_ratio:
+            return 'K', (ratio - p.black_ratio) / (1.0 - p.black_ratio)
+        if ratio <= p.colour_ratio:
+            # The colour's own channel is the one the dot barely darkens.
+            letter = _CHANNEL_COLOUR[int(np.argmin(darkness))]
+            others = np.sort(darkness)
+            # Second-lightest channel must be clearly darker than the lightest.
+            sep = (others[1] - others[0]) / top
+            if sep < 0.2:
+                return None, 0.0
+            return letter, (p.colour_ratio - ratio) / p.colour_ratio
+        return None, 0.0
+
+
+class _Frame:
+    """One image's segmentation: the kept connected components and their pixels."""
+
+    def __init__(self, image, darkest, white_small, step, labels, camera, grey_only, u, v,
+                 area, box, label):
+        self.image = image
+        self.darkest = darkest
+        self.white_small = white_small      # local white, decimated by `step`
+        self.step = step
+        self.labels = labels
+        self.camera = camera
+        self.grey_only = grey_only
+        self.u, self.v, self.area = u, v, area
+        self.box = box          # x, y, w, h of each component
+        self.label = label      # its label in `labels`
+
+    def covariance(self, j: int) -> np.ndarray:
+        """Second central moments of component ``j`` (with pixel quantisation)."""
+        x, y, w, h = self.box[j]
+        m = cv2.moments((self.labels[y:y + h, x:x + w] == self.label[j]).view(np.uint8),
+                        binaryImage=True)
+        a = max(m['m00'], 1.0)
+        return np.array([[m['mu20'] / a + 1 / 12, m['mu11'] / a],
+                         [m['mu11'] / a, m['mu02'] / a + 1 / 12]])
+
+    def centroid(self, j: int) -> np.ndarray:
+        """Darkness-weighted centroid over the dot's box and a 2 px rim around it."""
+        x, y, w, h = self.box[j]
+        H, W = self.darkest.shape
+        x0, y0 = max(0, x - 2), max(0, y - 2)
+        x1, y1 = min(W, x + w + 2), min(H, y + h + 2)
+        lab = self.labels[y0:y1, x0:x1]
+        # The paper's white at the dot, less a small floor so that paper noise
+        # in the rim does not pull the centroid.
+        sy = min(int(self.v[j]) // self.step, self.white_small.shape[0] - 1)
+        sx = min(int(self.u[j]) // self.step, self.white_small.shape[1] - 1)
+        level = 0.96 * float(self.white_small[sy, sx])
+        dark = np.clip(level - self.darkest[y0:y1, x0:x1].astype(np.float32), 0.0, None)
+        dark[(lab != 0) & (lab != self.label[j])] = 0.0
+        m = cv2.moments(dark)
+        if m['m00'] <= 0:
+            return np.array([self.u[j], self.v[j]])
+        return np.array([x0 + m['m10'] / m['m00'], y0 + m['m01'] / m['m00']])
+
+
+def _white_sample_points(config: PatternConfig) -> np.ndarray:
+    """Pattern-plane points on white paper: between ring dots and towards the corners."""
+    pts = []
+    mids = np.deg2rad(22.5 + 45.0 * np.arange(RING_POINTS))
+    for radius in config.ring_radii:
+        pts.extend(radius * np.column_stack([np.sin(mids), np.cos(mids)]))
+    outer = config.ring_radii[0] + config.ring_dot_radius
+    corner = 0.5 * (outer + config.card_size / 2 * np.sqrt(2))
+    if corner > outer + 0.5 * config.ring_dot_radius:
+        diag = np.deg2rad(45.0 + 90.0 * np.arange(4))
+        pts.extend(corner * np.column_stack([np.sin(diag), np.cos(diag)]))
+    return np.array(pts)
+
+
+def _check_image(image: np.ndarray) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise ImageError(f'image must be a numpy array, got {type(image).__name__}')
+    if image.dtype != np.uint8:
+        raise ImageError(f'image must be 8-bit (uint8), got {image.dtype}')
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = image[:, :, :3]
+    if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
+        raise ImageError(f'image must be HxW grey or HxWx3 BGR, got shape {image.shape}')
+    if image.shape[0] < 16 or image.shape[1] < 16:
+        raise ImageError(f'image too small: {image.shape[1]}x{image.shape[0]}')
+    return np.ascontiguousarray(image)
+
+
+def _min_channel(image: np.ndarray) -> np.ndarray:
+    """Per-pixel minimum over B, G, R: an erosion along the interleaved row."""
+    h, w = image.shape[:2]
+    rows = cv2.erode(image.reshape(h, w * 3), np.ones((1, 3), np.uint8))
+    return np.ascontiguousarray(rows[:, 1::3])
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _apply_h(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    p = np.column_stack([xy[:, 0], xy[:, 1], np.ones(len(xy))]) @ H.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def _h_scale(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Local image scale (px per metre) of the homography at plane points."""
+    eps = 1e-3
+    a = _apply_h(H, xy)
+    bx = _apply_h(H, xy + [eps, 0.0])
+    by = _apply_h(H, xy + [0.0, eps])
+    return np.sqrt(np.linalg.norm(bx - a, axis=1) * np.linalg.norm(by - a, axis=1)) / eps
+
+
+def _rotation_about_z(angle: float) -> np.ndarray:
+    """
+    Plane map taking final model coordinates to slot-ordered ones.
+
+    Slot ``k`` holds point ``k - point1_slot + 1``; slot coordinates are the
+    final ones turned clockwise (seen from the front) by ``point1_slot``
+    steps of 45 degrees.
+    """
+    c, s = np.cos(angle), np.sin(angle)
+    # Clockwise by `angle` in a frame with y up: (x, y) -> (x c + y s, -x s + y c).
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _distort_pixels(camera: CameraModel, undistorted_px: np.ndarray) -> np.ndarray:
+    n = (undistorted_px - [camera.cx, camera.cy]) / [camera.fx, camera.fy]
+    return camera.project(np.column_stack([n, np.ones(len(n))]))

@@ -1,0 +1,97 @@
+"""
+From an image to located cards: detection followed by a pose estimator.
+
+This is the one call the command line, the benchmark and the ROS node make;
+it holds no ROS types.
+"""
+
+from dataclasses import dataclass
+from typing import List, Optional
+
+import numpy as np
+
+from .camera import CameraModel
+from .detector import CardDetection, Detector, DetectorParams
+from .errors import ConfigError, EstimationError
+from .geometry import Pose
+from .pattern import PatternConfig
+from .pose_exact import estimate_exact, paper_angles, PosePrior
+
+ESTIMATORS = ('exact', 'paper')
+
+
+@dataclass(frozen=True)
+class LocatedCard:
+    """A detected card and, when it could be computed, the camera pose from it."""
+
+    detection: CardDetection
+    T_camera_pattern: Optional[Pose]
+    covariance: Optional[np.ndarray]       # 6x6, exact estimator only
+    reprojection_rms_px: Optional[float]
+    ambiguity: Optional[float]             # exact estimator only
+    psi_deg: Optional[float]
+    phi_deg: Optional[float]
+    theta_deg: Optional[float]
+    distance_m: Optional[float]
+    estimator: str
+    problem: Optional[str] = None          # why there is no pose
+
+    @property
+    def camera_in_pattern(self) -> Optional[np.ndarray]:
+        if self.T_camera_pattern is None:
+            return None
+        return self.T_camera_pattern.inverse().t
+
+
+class CardLocator:
+    """Detect cards and estimate the camera pose from each."""
+
+    def __init__(self, config: PatternConfig, estimator: str = 'exact',
+                 detector_params: DetectorParams = DetectorParams(),
+                 min_tilt_deg: float = 0.0, pixel_sigma: Optional[float] = None):
+        if estimator not in ESTIMATORS:
+            raise ConfigError(f'unknown estimator {estimator!r}: use one of '
+                              f'{", ".join(ESTIMATORS)}')
+        self.config = config
+        self.estimator = estimator
+        self.detector = Detector(config, detector_params)
+        self.min_tilt_deg = min_tilt_deg
+        self.pixel_sigma = pixel_sigma
+
+    def locate(self, image: np.ndarray, camera: CameraModel,
+               prior: Optional[PosePrior] = None) -> List[LocatedCard]:
+        """Every card in the image, biggest first, each with a pose when possible."""
+        cards = sorted(self.detector.detect(image, camera), key=lambda c: -c.size_px)
+        return [self.pose_of(card, camera, prior) for card in cards]
+
+    def pose_of(self, card: CardDetection, camera: CameraModel,
+                prior: Optional[PosePrior] = None) -> LocatedCard:
+        if card.code is None:
+            return _no_pose(card, self.estimator, 'grey image: no code, so no pose')
+        try:
+            if self.estimator == 'paper':
+                return self._paper(card, camera)
+            return self._exact(card, camera, prior)
+        except EstimationError as exc:
+            return _no_pose(card, self.estimator, str(exc))
+
+    def _exact(self, card: CardDetection, camera: CameraModel,
+               prior: Optional[PosePrior]) -> LocatedCard:
+        est = estimate_exact(card.points_px, camera, self.config, prior=prior,
+                             pixel_sigma=self.pixel_sigma)
+        psi, phi, theta, distance = paper_angles(est.T_camera_pattern, camera, self.config)
+        if phi < self.min_tilt_deg:
+            return _no_pose(card, 'exact', f'tilt {phi:.1f} deg below the minimum '
+                                           f'{self.min_tilt_deg:.1f} deg')
+        return LocatedCard(card, est.T_camera_pattern, est.covariance, est.reprojection_rms_px,
+                           est.ambiguity, psi, phi, theta, distance, 'exact')
+
+    def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
+        from .pose_paper import estimate_paper
+        est = estimate_paper(card.points_px, camera, self.config, min_tilt_deg=self.min_tilt_deg)
+        return LocatedCard(card, est.T_camera_pattern, None, est.reprojection_rms_px, None,
+                           est.psi_deg, est.phi_deg, est.theta_deg, est.distance_m, 'paper')
+
+
+def _no_pose(card: CardDetection, estimator: str, problem: str) -> LocatedCard:
+    return LocatedCard(card, None, None, None, None, None, None, None, None, estimator, problem)

@@ -1,0 +1,284 @@
+"""
+The exact pose estimator (method.md section 4), the project's default.
+
+Every dot is a known point of the card's plane with a known identity, so the
+camera pose is a planar Perspective-n-Point problem over up to 17 points:
+
+* dot centres are undistorted to an ideal pinhole image with the same K;
+* IPPE gives both planar solutions, each refined by Levenberg-Marquardt on
+  the reprojection error;
+* the projected centre of a circle is not the centre of its image ellipse:
+  each dot's observed centre is corrected by the ellipse-centre offset the
+  current pose predicts (Heikkila 2000), and the pose refined again;
+* the solution with the lower reprojection error wins, unless the two are
+  nearly equal (``ambiguity`` close to 1, the planar "flip"), where what is
+  known about the camera (a :class:`PosePrior`) decides;
+* the covariance is ``s^2 (J^T J)^-1`` with J the Jacobian of the
+  reprojection with respect to the camera pose in the pattern frame.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional, Tuple
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel
+from .errors import EstimationError
+from .geometry import Pose
+from .pattern import PatternConfig
+
+MIN_POINTS = 6
+DEFAULT_MIN_SIGMA_PX = 0.05   # floor of the pixel noise used for the covariance
+
+
+@dataclass(frozen=True)
+class PosePrior:
+    """
+    What is known about the camera besides the image, to resolve the planar flip.
+
+    ``up_in_camera``: the card's +y (up on the wall) expressed in the camera
+    frame, known on a robot from the head's tilt and the base's attitude.
+    ``camera_height``: the camera's y coordinate in the pattern frame (its
+    height relative to the card's centre), known from the robot's geometry.
+    ``previous_camera_in_pattern``: the last position, for continuity.
+    """
+
+    up_in_camera: Optional[np.ndarray] = None
+    up_sigma_rad: float = math.radians(5.0)
+    camera_height: Optional[float] = None
+    height_sigma: float = 0.15
+    previous_camera_in_pattern: Optional[np.ndarray] = None
+    previous_sigma: float = 0.5
+
+    def penalty(self, T_camera_pattern: Pose) -> float:
+        """Chi-square-like disagreement of a pose with this prior."""
+        total = 0.0
+        if self.up_in_camera is not None:
+            up = np.asarray(self.up_in_camera, dtype=float)
+            up = up / np.linalg.norm(up)
+            seen = T_camera_pattern.R[:, 1]
+            angle = math.acos(float(np.clip(seen @ up, -1.0, 1.0)))
+            total += (angle / self.up_sigma_rad) ** 2
+        camera = T_camera_pattern.inverse().t
+        if self.camera_height is not None:
+            total += ((camera[1] - self.camera_height) / self.height_sigma) ** 2
+        if self.previous_camera_in_pattern is not None:
+            d = np.linalg.norm(camera - np.asarray(self.previous_camera_in_pattern))
+            total += (d / self.previous_sigma) ** 2
+        return total
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """A camera pose from one card, with its uncertainty and how it was chosen."""
+
+    T_camera_pattern: Pose          # X_camera = R X_pattern + t
+    covariance: np.ndarray          # 6x6: camera position (m), rotation (rad) in the pattern frame
+    reprojection_rms_px: float
+    ambiguity: float                # other solution's RMS / this one's (>= 1 unless a prior chose)
+    alternative: Optional[Pose]     # the other planar solution
+    n_points: int
+    chosen_by: str                  # 'reprojection' or 'prior'
+
+    @property
+    def camera_in_pattern(self) -> np.ndarray:
+        return self.T_camera_pattern.inverse().t
+
+
+def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternConfig,
+                   prior: Optional[PosePrior] = None, pixel_sigma: Optional[float] = None,
+                   bias_correction: bool = True, ambiguity_threshold: float = 2.0
+                   ) -> PoseEstimate:
+    """Camera pose from detected dot centres (``(n_dots, 2)`` pixels, NaN = not seen)."""
+    points_px = np.asarray(points_px, dtype=float)
+    if points_px.shape != (config.n_dots, 2):
+        raise EstimationError(f'expected {config.n_dots} dot positions, got {points_px.shape}')
+    seen = ~np.isnan(points_px).any(axis=1)
+    if np.count_nonzero(seen) < MIN_POINTS:
+        raise EstimationError(f'need at least {MIN_POINTS} dots for a pose, got '
+                              f'{np.count_nonzero(seen)}')
+    obj = config.model_points()[seen]
+    radii = config.dot_radii()[seen]
+    observed = camera.undistort_pixels(points_px[seen])
+    K = camera.K
+
+    solutions = _ippe(obj, observed, K)
+    refined = []
+    for rvec, tvec in solutions:
+        rvec, tvec, corrected = _refine(obj, radii, observed, K, rvec, tvec, bias_correction)
+        residual = _project(obj, rvec, tvec, K) - corrected
+        ss = float(np.sum(residual ** 2))
+        refined.append((ss, rvec, tvec, corrected))
+    refined.sort(key=lambda sol: sol[0])
+    n = len(obj)
+    rms = [math.sqrt(s[0] / n) for s in refined]
+    best, chosen_by = 0, 'reprojection'
+    ambiguity = rms[1] / max(rms[0], 1e-9) if len(refined) > 1 else math.inf
+    if prior is not None and len(refined) > 1 and ambiguity < ambiguity_threshold:
+        sigma2 = max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2
+        costs = [s[0] / sigma2 + prior.penalty(Pose.from_rvec(s[1], s[2])) for s in refined]
+        best = int(np.argmin(costs))
+        if best != 0:
+            chosen_by = 'prior'
+    ss, rvec, tvec, corrected = refined[best]
+    pose = Pose.from_rvec(rvec, tvec)
+    other = refined[1 - best] if len(refined) > 1 else None
+    sigma = math.sqrt(ss / max(2 * n - 6, 1))
+    sigma = max(sigma, pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
+    covariance = pose_covariance(pose, obj, K, sigma)
+    return PoseEstimate(
+        T_camera_pattern=pose,
+        covariance=covariance,
+        reprojection_rms_px=rms[best],
+        ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
+        alternative=Pose.from_rvec(other[1], other[2]) if other is not None else None,
+        n_points=n,
+        chosen_by=chosen_by,
+    )
+
+
+def pose_covariance(T_camera_pattern: Pose, object_points: np.ndarray, K: np.ndarray,
+                    sigma_px: float) -> np.ndarray:
+    """
+    ``sigma^2 (J^T J)^-1`` for the camera pose in the pattern frame.
+
+    Parameters: camera position (x, y, z, metres) and a small rotation of the
+    camera about the pattern frame's axes (radians), the form
+    PoseWithCovariance uses. With the true pose and the true pixel noise this
+    is the Cramer-Rao bound of any unbiased estimator.
+    """
+    J = _camera_jacobian(T_camera_pattern, object_points, K)
+    info = J.T @ J
+    try:
+        return sigma_px ** 2 * np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.inf)
+
+
+def ellipse_centres(T_camera_pattern: Pose, centres_xy: np.ndarray, radii: np.ndarray,
+                    K: np.ndarray) -> np.ndarray:
+    """Ideal-image centres of the image ellipses of plane circles (N, 2)."""
+    H = K @ np.column_stack([T_camera_pattern.R[:, 0], T_camera_pattern.R[:, 1],
+                             T_camera_pattern.t])
+    n = len(radii)
+    cx, cy = centres_xy[:, 0], centres_xy[:, 1]
+    # Dual conic of each circle (inverse of its point conic), mapped by H:
+    # the image conic's centre is the pole of the line at infinity.
+    C = np.zeros((n, 3, 3))
+    C[:, 0, 0] = 1.0
+    C[:, 1, 1] = 1.0
+    C[:, 0, 2] = C[:, 2, 0] = -cx
+    C[:, 1, 2] = C[:, 2, 1] = -cy
+    C[:, 2, 2] = cx ** 2 + cy ** 2 - radii ** 2
+    dual = H[None] @ np.linalg.inv(C) @ H.T[None]
+    return dual[:, :2, 2] / dual[:, 2:3, 2]
+
+
+def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternConfig
+                 ) -> Tuple[float, float, float, float]:
+    """
+    Return the paper's (psi, phi, theta) in degrees and distance D (m) for a pose.
+
+    phi: angle of the line centre -> camera to the card normal; theta: its
+    azimuth from +y (point 1) towards +x; D: optical centre to card centre;
+    psi: angle of the outer ring's image ellipse long axis to the image
+    horizontal (ideal image).
+    """
+    c = T_camera_pattern.inverse().t
+    distance = float(np.linalg.norm(c))
+    phi = math.degrees(math.acos(float(np.clip(c[2] / distance, -1.0, 1.0))))
+    theta = math.degrees(math.atan2(c[0], c[1])) % 360.0
+    H = camera.K @ np.column_stack([T_camera_pattern.R[:, 0], T_camera_pattern.R[:, 1],
+                                    T_camera_pattern.t])
+    radius = config.ring_radii[0]
+    circle = np.diag([1.0, 1.0, -radius ** 2])
+    Hinv = np.linalg.inv(H)
+    Q = Hinv.T @ circle @ Hinv
+    A, B, C = Q[0, 0], 2.0 * Q[0, 1], Q[1, 1]
+    # Long axis: the eigenvector of the quadratic part with the smaller eigenvalue.
+    evals, evecs = np.linalg.eigh(np.array([[A, B / 2.0], [B / 2.0, C]]) * np.sign(A + C))
+    axis = evecs[:, 0]
+    psi = math.degrees(math.atan2(axis[1], axis[0]))
+    psi = (psi + 90.0) % 180.0 - 90.0
+    return psi, phi, theta, distance
+
+
+# Internals -----------------------------------------------------------------
+
+def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
+    try:
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+            obj.astype(np.float64), observed_px.astype(np.float64).reshape(-1, 1, 2), K,
+            None, flags=cv2.SOLVEPNP_IPPE)
+    except cv2.error as exc:
+        raise EstimationError(f'planar PnP failed: {exc.msg if hasattr(exc, "msg") else exc}')
+    if not n:
+        raise EstimationError('planar PnP found no solution (degenerate dot layout)')
+    return [(np.asarray(r, float).reshape(3), np.asarray(t, float).reshape(3))
+            for r, t in zip(rvecs, tvecs)]
+
+
+def _project(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> np.ndarray:
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))
+    cam = obj @ R.T + tvec
+    return _pixels(cam, K)
+
+
+def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
+    x, y = cam[:, 0] / cam[:, 2], cam[:, 1] / cam[:, 2]
+    return np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
+
+
+def _refine(obj, radii, observed, K, rvec, tvec, bias_correction):
+    """LM refinement, with the ellipse-centre correction iterated with the pose."""
+    corrected = observed
+    # The offset depends only weakly on the pose: one correction and a second
+    # refinement leave a residual bias far below the noise.
+    rounds = 2 if bias_correction else 1
+    for i in range(rounds):
+        rvec, tvec = cv2.solvePnPRefineLM(
+            obj, corrected.reshape(-1, 1, 2), K, None, rvec.reshape(3, 1).copy(),
+            tvec.reshape(3, 1).copy(),
+            (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-10))
+        rvec, tvec = rvec.reshape(3), tvec.reshape(3)
+        if i == rounds - 1:
+            break
+        pose = Pose.from_rvec(rvec, tvec)
+        offset = ellipse_centres(pose, obj[:, :2], radii, K) - _project(obj, rvec, tvec, K)
+        corrected = observed - offset
+    return rvec, tvec, corrected
+
+
+def _camera_jacobian(T_camera_pattern: Pose, obj: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """
+    d(pixels)/d(camera position, camera rotation about pattern axes), (2N, 6).
+
+    With the camera at c and R = R_camera_pattern, a point X is seen at
+    p = R (X - c). Moving the camera by dc and turning it by dtheta (about the
+    pattern's axes) changes p by -R dc + R [X - c]x dtheta.
+    """
+    R = T_camera_pattern.R
+    c = T_camera_pattern.inverse().t
+    d = obj - c
+    p = d @ R.T
+    x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    # Pixel derivative with respect to the camera-frame point, (N, 2, 3).
+    dpix = np.zeros((len(obj), 2, 3))
+    dpix[:, 0, 0] = K[0, 0] / z
+    dpix[:, 0, 1] = K[0, 1] / z
+    dpix[:, 0, 2] = -(K[0, 0] * x + K[0, 1] * y) / z ** 2
+    dpix[:, 1, 1] = K[1, 1] / z
+    dpix[:, 1, 2] = -K[1, 1] * y / z ** 2
+    cross = np.zeros((len(obj), 3, 3))
+    cross[:, 0, 1], cross[:, 0, 2] = -d[:, 2], d[:, 1]
+    cross[:, 1, 0], cross[:, 1, 2] = d[:, 2], -d[:, 0]
+    cross[:, 2, 0], cross[:, 2, 1] = -d[:, 1], d[:, 0]
+    dp = np.concatenate([np.broadcast_to(-R, (len(obj), 3, 3)), R[None] @ cross], axis=2)
+    return (dpix @ dp).reshape(-1, 6)
+
+
+def _rvec(R: np.ndarray) -> np.ndarray:
+    rvec, _ = cv2.Rodrigues(R)
+    return rvec.reshape(3)

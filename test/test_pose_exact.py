@@ -1,0 +1,147 @@
+"""The exact estimator on synthetic projections with known truth."""
+
+import math
+
+import numpy as np
+from pattern_locator.camera import CameraModel
+from pattern_locator.errors import EstimationError
+from pattern_locator.geometry import look_at, Pose, rotation_angle
+from pattern_locator.pattern import PatternConfig
+from pattern_locator.pose_exact import (ellipse_centres, estimate_exact, paper_angles,
+                                        pose_covariance, PosePrior)
+import pytest
+
+CFG = PatternConfig()
+
+
+def pose_from(distance, phi_deg, theta_deg, roll_deg=0.0):
+    """T_camera_pattern for a camera aimed at the centre from (phi, theta, D)."""
+    phi, theta = math.radians(phi_deg), math.radians(theta_deg)
+    c = distance * np.array([math.sin(phi) * math.sin(theta), math.sin(phi) * math.cos(theta),
+                             math.cos(phi)])
+    T_pattern_camera = look_at(c, np.zeros(3), up=(0.0, 1.0, 0.0), roll=math.radians(roll_deg))
+    return T_pattern_camera.inverse()
+
+
+def ellipse_observations(camera, T, rng=None, sigma=0.0):
+    """Image-ellipse centres (what a detector measures), distorted, plus noise."""
+    model = CFG.model_points()
+    ideal = ellipse_centres(T, model[:, :2], CFG.dot_radii(), camera.K)
+    rays = np.column_stack([(ideal - [camera.cx, camera.cy]) / [camera.fx, camera.fy],
+                            np.ones(len(ideal))])
+    px = camera.project(rays)
+    if rng is not None:
+        px = px + rng.normal(0.0, sigma, px.shape)
+    return px
+
+
+def test_ellipse_centre_is_the_centroid_of_the_projected_disc():
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(1.3, 60.0, 20.0)
+    centre = np.array([[0.0, 0.113]])
+    radius = np.array([0.014])
+    # Sample the disc densely, project, take the area centroid of the image.
+    r = np.sqrt(np.linspace(0, 1, 400))[:, None] * radius
+    a = np.linspace(0, 2 * np.pi, 400, endpoint=False)[None, :]
+    # Area-weighted sample: project small quads via the Jacobian determinant.
+    xs = (centre[0, 0] + r * np.cos(a)).ravel()
+    ys = (centre[0, 1] + r * np.sin(a)).ravel()
+    cam = np.column_stack([xs, ys, np.zeros_like(xs)]) @ T.R.T + T.t
+    w = 1.0 / cam[:, 2] ** 3        # image area element of a plane patch ~ 1 / z^3
+    uv = cam[:, :2] / cam[:, 2:3] * 1000.0 + [camera.cx, camera.cy]
+    centroid = (uv * w[:, None]).sum(0) / w.sum()
+    predicted = ellipse_centres(T, centre, radius, camera.K)[0]
+    projected = camera.project((T.apply(np.array([[0.0, 0.113, 0.0]]))))[0]
+    assert np.linalg.norm(predicted - centroid) < 0.01
+    assert np.linalg.norm(predicted - projected) > 0.05   # the bias is real at this range
+
+
+@pytest.mark.parametrize('distance, phi, theta, roll', [
+    (1.25, 40.0, 10.0, 0.0), (3.0, 60.0, 200.0, 30.0), (6.0, 20.0, 90.0, -80.0),
+    (2.0, 70.0, 300.0, 180.0),
+])
+def test_exact_pose_from_noise_free_points(distance, phi, theta, roll):
+    camera = CameraModel.from_fov(1280, 720, 70.0, D=[-0.25, 0.07, 0.0, 0.0, 0.0])
+    T = pose_from(distance, phi, theta, roll)
+    est = estimate_exact(ellipse_observations(camera, T), camera, CFG)
+    assert np.linalg.norm(est.camera_in_pattern - T.inverse().t) < 1e-4 * distance
+    assert rotation_angle(est.T_camera_pattern.R, T.R) < 1e-4
+    psi, phi_est, theta_est, d_est = paper_angles(est.T_camera_pattern, camera, CFG)
+    assert phi_est == pytest.approx(phi, abs=1e-3)
+    assert (theta_est - theta + 180) % 360 - 180 == pytest.approx(0.0, abs=1e-2)
+    assert d_est == pytest.approx(distance, rel=1e-5)
+
+
+def test_bias_correction_matters_at_short_range():
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(1.25, 55.0, 30.0)
+    obs = ellipse_observations(camera, T)
+    with_fix = estimate_exact(obs, camera, CFG)
+    without = estimate_exact(obs, camera, CFG, bias_correction=False)
+    truth = T.inverse().t
+    err_with = np.linalg.norm(with_fix.camera_in_pattern - truth)
+    err_without = np.linalg.norm(without.camera_in_pattern - truth)
+    assert err_with < 1e-5
+    assert err_without > 20 * err_with
+
+
+def test_covariance_matches_the_scatter_of_noisy_estimates():
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(3.0, 45.0, 20.0)
+    rng = np.random.default_rng(3)
+    sigma = 0.2
+    errors = []
+    for _ in range(200):
+        est = estimate_exact(ellipse_observations(camera, T, rng, sigma), camera, CFG,
+                             pixel_sigma=sigma)
+        errors.append(est.camera_in_pattern - T.inverse().t)
+    errors = np.array(errors)
+    crb = pose_covariance(T, CFG.model_points(), camera.K, sigma)[:3, :3]
+    # The estimator is efficient: its scatter matches the Cramer-Rao bound.
+    ratio = np.trace(np.cov(errors.T)) / np.trace(crb)
+    assert 0.75 < ratio < 1.3
+    # And its own covariance is close to the bound.
+    assert np.trace(est.covariance[:3, :3]) / np.trace(crb) == pytest.approx(1.0, rel=0.3)
+
+
+def test_one_ring_and_missing_dots():
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(2.0, 50.0, 120.0)
+    obs = ellipse_observations(camera, T)
+    obs[1:9] = np.nan         # outer ring occluded
+    est = estimate_exact(obs, camera, CFG)
+    assert est.n_points == 9
+    assert np.linalg.norm(est.camera_in_pattern - T.inverse().t) < 1e-4
+    obs[9:15] = np.nan
+    with pytest.raises(EstimationError, match='at least 6 dots'):
+        estimate_exact(obs, camera, CFG)
+
+
+def test_prior_resolves_the_flip_and_ambiguity_is_reported():
+    # Far away and nearly frontal the two planar solutions explain the image
+    # almost equally well.
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(8.0, 12.0, 180.0)
+    rng = np.random.default_rng(5)
+    obs = ellipse_observations(camera, T, rng, 0.3)
+    est = estimate_exact(obs, camera, CFG)
+    assert est.ambiguity < 2.0 and est.alternative is not None
+    up_in_camera = T.R[:, 1]
+    prior = PosePrior(up_in_camera=up_in_camera)
+    with_prior = estimate_exact(obs, camera, CFG, prior=prior)
+    assert rotation_angle(with_prior.T_camera_pattern.R, T.R) < math.radians(3.0)
+    wrong_prior = PosePrior(up_in_camera=with_prior.alternative.R[:, 1])
+    flipped = estimate_exact(obs, camera, CFG, prior=wrong_prior)
+    assert rotation_angle(flipped.T_camera_pattern.R, with_prior.alternative.R) < 1e-6
+
+
+def test_wrong_shape_is_an_estimation_error():
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    with pytest.raises(EstimationError, match='expected 17 dot positions'):
+        estimate_exact(np.zeros((9, 2)), camera, CFG)
+
+
+def test_pose_helpers_are_consistent():
+    T = pose_from(2.0, 30.0, 45.0)
+    assert np.allclose((T @ T.inverse()).matrix(), np.eye(4))
+    assert isinstance(T, Pose)

@@ -29,3 +29,7 @@ class ImageError(PatternLocatorError):
 
 class EstimationError(PatternLocatorError):
     """A pose cannot be estimated from the detected points."""
+
+
+class PrintError(PatternLocatorError):
+    """A card file cannot be written (unknown format, unwritable path)."""

@@ -104,34 +104,42 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     observed = camera.undistort_pixels(points_px[seen])
     K = camera.K
 
-    solutions = _ippe(obj, observed, K)
-    refined = []
-    for rvec, tvec in solutions:
-        rvec, tvec, corrected = _refine(obj, radii, observed, K, rvec, tvec, bias_correction)
-        residual = _project(obj, rvec, tvec, K) - corrected
-        ss = float(np.sum(residual ** 2))
-        refined.append((ss, rvec, tvec, corrected))
-    refined.sort(key=lambda sol: sol[0])
+    # IPPE's two planar solutions are close to optimal: their residuals tell
+    # them apart, and only the chosen one is corrected and refined.
+    candidates = sorted(_ippe(obj, observed, K), key=lambda sol: sol[0])
     n = len(obj)
-    rms = [math.sqrt(s[0] / n) for s in refined]
+    rms = [math.sqrt(c[0] / n) for c in candidates]
+    ambiguity = rms[1] / max(rms[0], 1e-9) if len(candidates) > 1 else math.inf
+    if ambiguity < ambiguity_threshold:
+        # A close call: compare the two at their own optimum.
+        candidates = sorted((_refined_candidate(obj, observed, K, r, t)
+                             for _, r, t in candidates), key=lambda sol: sol[0])
+        rms = [math.sqrt(c[0] / n) for c in candidates]
+        ambiguity = rms[1] / max(rms[0], 1e-9)
     best, chosen_by = 0, 'reprojection'
-    ambiguity = rms[1] / max(rms[0], 1e-9) if len(refined) > 1 else math.inf
-    if prior is not None and len(refined) > 1 and ambiguity < ambiguity_threshold:
+    if prior is not None and len(candidates) > 1 and ambiguity < ambiguity_threshold:
         sigma2 = max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2
-        costs = [s[0] / sigma2 + prior.penalty(Pose.from_rvec(s[1], s[2])) for s in refined]
+        costs = [c[0] / sigma2 + prior.penalty(Pose.from_rvec(c[1], c[2])) for c in candidates]
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
-    ss, rvec, tvec, corrected = refined[best]
+    _, rvec, tvec = candidates[best]
+    corrected = observed
+    if bias_correction:
+        # The offset depends only weakly on the pose: computed from IPPE's
+        # pose it leaves a bias far below the noise after the refinement.
+        offset = (ellipse_centres(Pose.from_rvec(rvec, tvec), obj[:, :2], radii, K)
+                  - _project(obj, rvec, tvec, K))
+        corrected = observed - offset
+    rvec, tvec = _refine_lm(obj, corrected, K, rvec, tvec)
+    ss = float(np.sum((_project(obj, rvec, tvec, K) - corrected) ** 2))
     pose = Pose.from_rvec(rvec, tvec)
-    other = refined[1 - best] if len(refined) > 1 else None
-    sigma = math.sqrt(ss / max(2 * n - 6, 1))
-    sigma = max(sigma, pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
-    covariance = pose_covariance(pose, obj, K, sigma)
+    other = candidates[1 - best] if len(candidates) > 1 else None
+    sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
     return PoseEstimate(
         T_camera_pattern=pose,
-        covariance=covariance,
-        reprojection_rms_px=rms[best],
+        covariance=pose_covariance(pose, obj, K, sigma),
+        reprojection_rms_px=math.sqrt(ss / n),
         ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
         alternative=Pose.from_rvec(other[1], other[2]) if other is not None else None,
         n_points=n,
@@ -216,8 +224,12 @@ def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
         raise EstimationError(f'planar PnP failed: {exc.msg if hasattr(exc, "msg") else exc}')
     if not n:
         raise EstimationError('planar PnP found no solution (degenerate dot layout)')
-    return [(np.asarray(r, float).reshape(3), np.asarray(t, float).reshape(3))
-            for r, t in zip(rvecs, tvecs)]
+    solutions = []
+    for r, t in zip(rvecs, tvecs):
+        r, t = np.asarray(r, float).reshape(3), np.asarray(t, float).reshape(3)
+        ss = float(np.sum((_project(obj, r, t, K) - observed_px) ** 2))
+        solutions.append((ss, r, t))
+    return solutions
 
 
 def _project(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -231,24 +243,18 @@ def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
 
 
-def _refine(obj, radii, observed, K, rvec, tvec, bias_correction):
-    """LM refinement, with the ellipse-centre correction iterated with the pose."""
-    corrected = observed
-    # The offset depends only weakly on the pose: one correction and a second
-    # refinement leave a residual bias far below the noise.
-    rounds = 2 if bias_correction else 1
-    for i in range(rounds):
-        rvec, tvec = cv2.solvePnPRefineLM(
-            obj, corrected.reshape(-1, 1, 2), K, None, rvec.reshape(3, 1).copy(),
-            tvec.reshape(3, 1).copy(),
-            (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 1e-10))
-        rvec, tvec = rvec.reshape(3), tvec.reshape(3)
-        if i == rounds - 1:
-            break
-        pose = Pose.from_rvec(rvec, tvec)
-        offset = ellipse_centres(pose, obj[:, :2], radii, K) - _project(obj, rvec, tvec, K)
-        corrected = observed - offset
-    return rvec, tvec, corrected
+def _refined_candidate(obj, observed, K, rvec, tvec):
+    rvec, tvec = _refine_lm(obj, observed, K, rvec, tvec)
+    return float(np.sum((_project(obj, rvec, tvec, K) - observed) ** 2)), rvec, tvec
+
+
+def _refine_lm(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, rvec: np.ndarray,
+               tvec: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Levenberg-Marquardt on the reprojection error in the ideal image."""
+    rvec, tvec = cv2.solvePnPRefineLM(
+        obj, observed.reshape(-1, 1, 2), K, None, rvec.reshape(3, 1).copy(),
+        tvec.reshape(3, 1).copy(), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 1e-10))
+    return rvec.reshape(3), tvec.reshape(3)
 
 
 def _camera_jacobian(T_camera_pattern: Pose, obj: np.ndarray, K: np.ndarray) -> np.ndarray:

@@ -132,7 +132,7 @@ def test_prior_resolves_the_flip_and_ambiguity_is_reported():
     assert rotation_angle(with_prior.T_camera_pattern.R, T.R) < math.radians(3.0)
     wrong_prior = PosePrior(up_in_camera=with_prior.alternative.R[:, 1])
     flipped = estimate_exact(obs, camera, CFG, prior=wrong_prior)
-    assert rotation_angle(flipped.T_camera_pattern.R, with_prior.alternative.R) < 1e-6
+    assert rotation_angle(flipped.T_camera_pattern.R, with_prior.alternative.R) < 1e-3
 
 
 def test_wrong_shape_is_an_estimation_error():

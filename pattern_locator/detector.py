@@ -454,7 +454,6 @@ class Detector:
         return np.maximum(white, 1.0)
 
 
-
 def _chromatic_letter(darkness: np.ndarray) -> Tuple[Optional[str], float]:
     """Colour of a chromatic dot: the channel it darkens least, if clearly so."""
     order = np.argsort(darkness)
@@ -506,7 +505,7 @@ class _Frame:
         return x0, y0, x1, y1, lab, lut[lab]
 
     def centroids(self, js: Sequence[int]) -> np.ndarray:
-        """Return darkness-weighted centroids (m, 2) of dots ``js``, each with a 2 px rim."""
+        """Return the darkness-weighted centre, shape (m, 2), of each dot with a 2 px rim."""
         x0, y0, x1, y1, lab, own = self._card_roi(js, 2)
         # Background pixels next to a dot belong to the rim of the nearest dot
         # (blur spreads each dot; splitting shared rims by distance keeps the
@@ -537,7 +536,7 @@ class _Frame:
         return out
 
     def darkness(self, js: Sequence[int], ref_white: np.ndarray, gamma: float) -> np.ndarray:
-        """Return each dot's per-channel darkness (m, 3), 1 - colour / white in linear light."""
+        """Return each dot's per-channel darkness, shape (m, 3): 1 - colour / white, linear."""
         _, _, _, _, _, own = self._card_roi(js, 0)
         x0, y0 = self._roi_origin
         pick = own > 0

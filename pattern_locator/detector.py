@@ -39,9 +39,6 @@ from .pattern import Code, Ids, PatternConfig, RING_POINTS
 
 LOG = logging.getLogger(__name__)
 
-_CHANNEL_COLOUR = 'BGR'  # OpenCV channel order: index of the channel -> colour letter
-_MIN_SEPARATION = 0.12   # a colour's own channel must be this much lighter than the next
-
 
 @dataclass(frozen=True)
 class DetectorParams:
@@ -55,9 +52,12 @@ class DetectorParams:
     min_ellipse_fill: float = 0.55  # blob area / area of its moment ellipse (convex, round)
     max_homography_error: float = 0.35    # in units of the dot's image radius
     gamma: float = 2.2              # the camera's encoding; colours are compared in linear light
-    black_ratio: float = 0.70       # black dots: darkness min/max over channels at least this
-    colour_ratio: float = 0.88      # coloured dots: at most this, and 0.1 below the black
+    max_black_chroma: float = 0.12  # chromatic part of a black dot's darkness, at most
+    min_colour_chroma: float = 0.04     # a coloured dot's chromatic part, at least
+    min_colour_chroma_ratio: float = 2.0    # ...and this many times the black's
+    min_colour_margin: float = 0.2  # cosine to its colour minus cosine to the next
     min_darkness: float = 0.25      # a dot darker than the card by less than this is unreadable
+    min_window_darkness: float = 0.12   # a dot measured in a window must be this dark
 
 
 @dataclass(frozen=True)
@@ -101,6 +101,7 @@ class Detector:
         # Expected ring radii in units of the centre dot radius.
         self._ring_rho = np.array(config.ring_radii) / config.centre_dot_radius
         self._white_xy = _white_sample_points(config)
+        self._colour_directions = _colour_directions(config)
 
     # Public ----------------------------------------------------------------
 
@@ -283,13 +284,20 @@ class Detector:
         added = [j for j in slot_blob[slot_blob >= 0].tolist() if j not in centres]
         if added:
             centres.update(zip(added, frame.centroids(added)))
-        complete = [ring for ring in range(n_rings) if np.all(slot_blob[ring] >= 0)]
+        # Dots still missing may be too faint to segment, or merged with their
+        # neighbour on the other ring (far away, tilted): measure them in a
+        # window where the homography puts them.
+        windows = self._window_dots(frame, H, slot_blob) if np.any(slot_blob < 0) else {}
+        filled = slot_blob >= 0
+        for ring, k in windows:
+            filled[ring, k] = True
+        complete = [ring for ring in range(n_rings) if np.all(filled[ring])]
         if not complete:
             return None
         if frame.grey_only:
             point1_slot, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
         else:
-            read = self._read_colours(frame, H, slot_blob, ci)
+            read = self._read_colours(frame, H, slot_blob, ci, windows)
             if read is None:
                 return None
             point1_slot, code, margin, ring_codes = read
@@ -303,11 +311,13 @@ class Detector:
         areas[0] = frame.area[ci]
         for ring in range(n_rings):
             for k in range(RING_POINTS):
-                j = slot_blob[ring, k]
-                if j >= 0:
-                    d = cfg.dot_index(ring, (k - point1_slot) % RING_POINTS + 1)
-                    points[d] = centres[j]
-                    areas[d] = frame.area[j]
+                d = cfg.dot_index(ring, (k - point1_slot) % RING_POINTS + 1)
+                if (ring, k) in windows:
+                    points[d], ys, _ = windows[ring, k]
+                    areas[d] = len(ys)
+                elif slot_blob[ring, k] >= 0:
+                    points[d] = centres[slot_blob[ring, k]]
+                    areas[d] = frame.area[slot_blob[ring, k]]
         # Homography in final dot order (point 1 up) for the callers.
         H_final = H @ _rotation_about_z(point1_slot * np.pi / 4)
         outer = complete[0]
@@ -362,72 +372,153 @@ class Detector:
                 slot_blob[ring, k] = j
                 used.add(j)
 
+    def _window_dots(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray) -> dict:
+        """
+        Measure dots in windows where the homography predicts them.
+
+        For every slot with a missing dot, both rings' dots of that slot are
+        measured this way (a dot merged with its neighbour was assigned to one
+        ring with a centre pulled towards the other). Each pixel counts for
+        the nearest predicted dot only. Returns ``{(ring, k): (centre, ys, xs)}``
+        with the pixels of each dot's core, for the ones dark enough.
+        """
+        cfg = self.config
+        n_rings = slot_blob.shape[0]
+        slots = [(ring, k) for ring in range(n_rings) for k in range(RING_POINTS)]
+        model = np.array([self._model[cfg.dot_index(ring, k + 1)] for ring, k in slots]
+                         + [self._model[0]])
+        pred = _apply_h(H, model)
+        radius = _h_scale(H, model) * cfg.ring_dot_radius
+        if frame.camera is not None:
+            pred = _distort_pixels(frame.camera, pred)
+        wanted = {k for ring, k in np.argwhere(slot_blob < 0)}
+        out = {}
+        h, w = frame.darkest.shape
+        for i, (ring, k) in enumerate(slots):
+            if k not in wanted:
+                continue
+            px, py = pred[i]
+            r = max(1.5, radius[i] + 0.5)
+            outer = 2.0 * r      # the paper around a dot must be lighter than the dot
+            x0, x1 = max(0, int(px - outer)), min(w, int(px + outer) + 2)
+            y0, y1 = max(0, int(py - outer)), min(h, int(py + outer) + 2)
+            if x1 - x0 < 2 or y1 - y0 < 2:
+                continue
+            yy, xx = np.mgrid[y0:y1, x0:x1]
+            d2 = (xx - px) ** 2 + (yy - py) ** 2
+            others = np.delete(pred, i, axis=0)
+            near = others[np.hypot(others[:, 0] - px, others[:, 1] - py) < 2 * outer]
+            voronoi = np.ones_like(d2, dtype=bool)
+            for ox, oy in near:
+                voronoi &= d2 < (xx - ox) ** 2 + (yy - oy) ** 2
+            cell = voronoi & (d2 <= r * r)
+            ring_cell = voronoi & (d2 > r * r) & (d2 <= outer * outer)
+            level = 0.96 * float(frame.white_small[min(int(py) // frame.step,
+                                                       frame.white_small.shape[0] - 1),
+                                                   min(int(px) // frame.step,
+                                                       frame.white_small.shape[1] - 1)])
+            dark = np.clip(level - frame.darkest[y0:y1, x0:x1].astype(np.float32), 0.0, None)
+            # A dot, not an occluder or a shadow: dark inside, paper around it.
+            if not np.any(ring_cell) or dark[ring_cell].mean() > 0.5 * dark[cell].mean():
+                continue
+            dark = dark * cell
+            total = float(dark.sum())
+            if total <= 0 or dark.max() < self.params.min_window_darkness * level:
+                continue
+            cx = float((dark * xx).sum()) / total
+            cy = float((dark * yy).sum()) / total
+            if np.hypot(cx - px, cy - py) > max(1.0, 0.6 * radius[i]):
+                continue
+            core = dark >= dark[cell].mean()
+            out[ring, k] = (np.array([cx, cy]), yy[core & cell], xx[core & cell])
+        return out
+
     # Colours ---------------------------------------------------------------
 
-    def _read_colours(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray, ci: int):
+    def _read_colours(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray, ci: int,
+                      windows: dict):
         """
-        Point 1's slot, the code, a margin and each ring's colours; None if unclear.
+        Return point 1's slot, the code, a margin and each ring's colours; None if unclear.
 
-        Colours are judged relative to each other, which survives blur, JPEG
-        chroma loss and coloured light: point 1 is the slot whose dots are
-        the most evenly dark over the three channels (black), clearly more
-        so than any other slot; every other dot must be clearly chromatic,
-        its colour being the channel it darkens least.
+        Each dot's darkness (1 - colour / card white, per channel, linear
+        light) is split into its mean and its chromatic part. White
+        normalisation cancels coloured light; blur and JPEG chroma loss mix
+        a dot with paper or grey, which shrinks the chromatic part but keeps
+        its direction. Point 1 is the slot whose dots are the least chromatic
+        (black), clearly less than any other slot; every other dot takes the
+        printed colour whose chromatic direction is nearest, and must be
+        clearly nearer to it than to the others. Both rings must agree.
         """
         p = self.params
         ref_white = self._card_white(frame, H)
         if ref_white is None:
             return None
         n_rings = slot_blob.shape[0]
-        dark = np.full((n_rings, RING_POINTS, 3), np.nan)
-        assigned = slot_blob >= 0
-        measured = frame.darkness([ci] + slot_blob[assigned].tolist(), ref_white,
-                                  self.params.gamma)
-        dark[assigned] = measured[1:]
-        seen = ~np.isnan(dark[:, :, 0])
-        top = np.where(seen, np.nanmax(np.where(seen[:, :, None], dark, 0.0), axis=2), 0.0)
-        if np.any(top[seen] < p.min_darkness):
+        blob_slot = slot_blob >= 0
+        for ring, k in windows:
+            blob_slot[ring, k] = False
+        measured = np.empty((1 + RING_POINTS * n_rings, 3))
+        rows = np.full((n_rings, RING_POINTS), -1)
+        rows[blob_slot] = np.arange(1, 1 + np.count_nonzero(blob_slot))
+        measured[:1 + np.count_nonzero(blob_slot)] = frame.darkness(
+            [ci] + slot_blob[blob_slot].tolist(), ref_white, p.gamma)
+        row = 1 + np.count_nonzero(blob_slot)
+        for (ring, k), (_, ys, xs) in windows.items():
+            pix = frame.image[ys, xs].astype(np.float32)
+            dark = 1.0 - np.clip(pix / ref_white, 0.0, 1.0) ** p.gamma
+            measured[row] = dark.mean(axis=0)
+            rows[ring, k] = row
+            row += 1
+        assigned = rows >= 0
+        measured = measured[np.concatenate([[0], rows[assigned]])]
+        if np.any(measured.max(axis=1) < p.min_darkness):
             return None
-        balance = np.where(seen, np.nanmin(np.where(seen[:, :, None], dark, 1.0), axis=2)
-                           / np.maximum(top, 1e-9), np.nan)       # 1 = grey/black
-        slot_balance = np.nanmean(balance, axis=0)
-        if np.any(np.isnan(slot_balance)):
+        chroma = measured - measured.mean(axis=1, keepdims=True)
+        strength = np.linalg.norm(chroma, axis=1) / measured.max(axis=1)
+        # Slot of point 1: the least chromatic on average over the rings.
+        slot_strength = np.full((n_rings, RING_POINTS), np.nan)
+        slot_strength[assigned] = strength[1:]
+        mean_strength = np.nanmean(slot_strength, axis=0)
+        if np.any(np.isnan(mean_strength)):
             return None
-        point1 = int(np.argmax(slot_balance))
-        black = balance[:, point1][seen[:, point1]]
-        chromatic = balance[:, np.arange(RING_POINTS) != point1]
-        chromatic = chromatic[~np.isnan(chromatic)]
-        most_grey_colour = float(np.max(chromatic))
-        if np.min(black) < p.black_ratio or most_grey_colour > p.colour_ratio or (
-                np.min(black) - most_grey_colour < 0.1):
+        point1 = int(np.argmin(mean_strength))
+        black = float(np.nanmax(slot_strength[:, point1]))
+        others = np.delete(slot_strength, point1, axis=1)
+        weakest_colour = float(np.nanmin(others))
+        if black > p.max_black_chroma or weakest_colour < p.min_colour_chroma_ratio * black \
+                or weakest_colour < p.min_colour_chroma:
             return None
-        # Each chromatic dot's colour is the channel it darkens least, if clearly so.
-        ordered = np.sort(dark, axis=2)
-        separation = (ordered[:, :, 1] - ordered[:, :, 0]) / np.maximum(top, 1e-9)
-        channel = np.argmin(np.where(seen[:, :, None], dark, 0.0), axis=2)
-        colour_slot = seen.copy()
+        # Colours of the chromatic dots: nearest printed direction, with a margin.
+        cosine = (chroma / np.maximum(np.linalg.norm(chroma, axis=1, keepdims=True), 1e-9)
+                  ) @ self._colour_directions.T                   # (m, 3) for R, G, B
+        ranked = np.sort(cosine, axis=1)
+        letter = np.argmax(cosine, axis=1)
+        margin = ranked[:, -1] - ranked[:, -2]
+        slot_letter = np.full((n_rings, RING_POINTS), -1)
+        slot_letter[assigned] = letter[1:]
+        slot_margin = np.full((n_rings, RING_POINTS), np.inf)
+        slot_margin[assigned] = margin[1:]
+        colour_slot = assigned.copy()
         colour_slot[:, point1] = False
-        if np.any(separation[colour_slot] < _MIN_SEPARATION):
+        if np.any(slot_margin[colour_slot] < p.min_colour_margin):
             return None
-        channel = np.where(colour_slot, channel, -1)
-        agreed = channel.max(axis=0)
-        if np.any((channel >= 0) & (channel != agreed[None, :])):
+        slot_letter[~colour_slot] = -1
+        agreed = slot_letter.max(axis=0)
+        if np.any((slot_letter >= 0) & (slot_letter != agreed[None, :])):
             return None                 # the rings disagree: never guess
         slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
-        letters = 'K' + ''.join(_CHANNEL_COLOUR[agreed[k]] for k in slots[1:])
-        margins = [float(np.min(black) - most_grey_colour)] + separation[colour_slot].tolist()
-        centre = measured[0]
-        if centre.max() < p.min_darkness:
-            return None
-        centre_balance = float(centre.min() / centre.max())
-        if centre_balance >= 0.5 * (np.min(black) + most_grey_colour):
+        letters = 'K' + ''.join('RGB'[agreed[k]] for k in slots[1:])
+        margins = [weakest_colour - black] + slot_margin[colour_slot].tolist()
+        # The centre: black if it is as grey as point 1 (nearer to it than to
+        # the weakest colour), else its nearest colour.
+        if strength[0] <= 0.5 * (black + weakest_colour):
             centre_letter = 'K'
+        elif margin[0] >= p.min_colour_margin and strength[0] >= p.min_colour_chroma:
+            centre_letter = 'RGB'[letter[0]]
+            margins.append(float(margin[0]))
         else:
-            centre_letter, sep = _chromatic_letter(centre)
-            if centre_letter is None or centre_balance > p.colour_ratio:
-                return None
-            margins.append(sep)
-        ring_codes = tuple('K' + ''.join(_CHANNEL_COLOUR[channel[ring, k]] if channel[ring, k] >= 0
+            return None
+        ring_codes = tuple('K' + ''.join('RGB'[slot_letter[ring, k]] if slot_letter[ring, k] >= 0
                                          else '?' for k in slots[1:])
                            for ring in range(n_rings))
         try:
@@ -452,16 +543,6 @@ class Detector:
         if np.max(white) < self.params.min_white:
             return None
         return np.maximum(white, 1.0)
-
-
-def _chromatic_letter(darkness: np.ndarray) -> Tuple[Optional[str], float]:
-    """Colour of a chromatic dot: the channel it darkens least, if clearly so."""
-    order = np.argsort(darkness)
-    top = max(float(darkness.max()), 1e-9)
-    separation = float(darkness[order[1]] - darkness[order[0]]) / top
-    if separation < _MIN_SEPARATION:
-        return None, 0.0
-    return _CHANNEL_COLOUR[int(order[0])], separation
 
 
 class _Frame:
@@ -554,6 +635,18 @@ class _Frame:
         count = np.maximum(np.bincount(ids[core], minlength=m), 1)
         return np.column_stack([np.bincount(ids[core], dark[core, c], m) / count
                                 for c in range(3)])
+
+
+def _colour_directions(config: PatternConfig) -> np.ndarray:
+    """Return the unit chromatic directions (rows R, G, B; columns B, G, R) of the inks."""
+    rows = []
+    for letter in 'RGB':
+        srgb = np.array(config.colour_rgb(letter)[::-1], dtype=float) / 255.0
+        linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+        dark = 1.0 - linear
+        chroma = dark - dark.mean()
+        rows.append(chroma / np.linalg.norm(chroma))
+    return np.array(rows)
 
 
 def _white_sample_points(config: PatternConfig) -> np.ndarray:

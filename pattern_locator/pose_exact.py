@@ -31,6 +31,8 @@ from .pattern import PatternConfig
 
 MIN_POINTS = 6
 DEFAULT_MIN_SIGMA_PX = 0.05   # floor of the pixel noise used for the covariance
+MIN_OUTLIER_PX = 0.2          # a dot this far off the fit (and OUTLIER_FACTOR times the
+OUTLIER_FACTOR = 5.0          # median residual) is dropped
 
 
 @dataclass(frozen=True)
@@ -132,7 +134,16 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
                   - _project(obj, rvec, tvec, K))
         corrected = observed - offset
     rvec, tvec = _refine_lm(obj, corrected, K, rvec, tvec)
-    ss = float(np.sum((_project(obj, rvec, tvec, K) - corrected) ** 2))
+    residual = np.linalg.norm(_project(obj, rvec, tvec, K) - corrected, axis=1)
+    # A dot partly hidden by an occluder or merged with a neighbour keeps a
+    # centre far off the others' fit: drop it and solve again.
+    outliers = residual > max(MIN_OUTLIER_PX, OUTLIER_FACTOR * float(np.median(residual)))
+    if np.any(outliers) and n - np.count_nonzero(outliers) >= MIN_POINTS:
+        cleaned = points_px.copy()
+        cleaned[np.flatnonzero(seen)[outliers]] = np.nan
+        return estimate_exact(cleaned, camera, config, prior, pixel_sigma, bias_correction,
+                              ambiguity_threshold)
+    ss = float(np.sum(residual ** 2))
     pose = Pose.from_rvec(rvec, tvec)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)

@@ -170,14 +170,21 @@ class Detector:
         dv = frame.v[None, :] - frame.v[:, None]
         ratio = frame.area[None, :] / frame.area[:, None]
         close = ((du * du + dv * dv < (radius * radius)[:, None])
-                 & (ratio > 0.04) & (ratio < 1.2))
+                 & (ratio > 0.06) & (ratio < 1.0))
         np.fill_diagonal(close, False)
         candidates = np.flatnonzero(close.sum(axis=1) >= RING_POINTS)
         # Ring dots surround their centre: they fall in most of the eight
         # octants around it (a row of letters falls in two).
         octant = (np.floor((np.arctan2(dv, du) + np.pi) / (np.pi / 4)).astype(int)) % 8
-        surrounded = [i for i in candidates
-                      if len(np.unique(octant[i][close[i]])) >= 5]
+        surrounded = []
+        for i in candidates:
+            ring_areas = frame.area[close[i]]
+            # Ring dots are all the same size (within blur and perspective).
+            typical = np.median(ring_areas)
+            alike = (ring_areas > 0.4 * typical) & (ring_areas < 2.5 * typical)
+            if (np.count_nonzero(alike) >= RING_POINTS
+                    and len(np.unique(octant[i][close[i]][alike])) >= 5):
+                surrounded.append(i)
         return sorted(surrounded, key=lambda i: -frame.area[i])
 
     def _card_at(self, frame: '_Frame', ci: int):
@@ -361,7 +368,7 @@ class Detector:
         model = np.array([self._model[self.config.dot_index(int(r), int(k) + 1)]
                           for r, k in missing])
         pred = _apply_h(H, model)
-        if frame.camera is not None:
+        if frame.camera is not None and frame.camera.has_distortion:
             pred = _distort_pixels(frame.camera, pred)
         tol = np.maximum(0.75, self.params.max_homography_error * _h_scale(H, model)
                          * self.config.ring_dot_radius)
@@ -389,7 +396,7 @@ class Detector:
                          + [self._model[0]])
         pred = _apply_h(H, model)
         radius = _h_scale(H, model) * cfg.ring_dot_radius
-        if frame.camera is not None:
+        if frame.camera is not None and frame.camera.has_distortion:
             pred = _distort_pixels(frame.camera, pred)
         wanted = {k for ring, k in np.argwhere(slot_blob < 0)}
         out = {}
@@ -464,9 +471,7 @@ class Detector:
             [ci] + slot_blob[blob_slot].tolist(), ref_white, p.gamma)
         row = 1 + np.count_nonzero(blob_slot)
         for (ring, k), (_, ys, xs) in windows.items():
-            pix = frame.image[ys, xs].astype(np.float32)
-            dark = 1.0 - np.clip(pix / ref_white, 0.0, 1.0) ** p.gamma
-            measured[row] = dark.mean(axis=0)
+            measured[row] = linear_darkness(frame.image[ys, xs], ref_white, p.gamma).mean(axis=0)
             rows[ring, k] = row
             row += 1
         assigned = rows >= 0
@@ -530,7 +535,7 @@ class Detector:
     def _card_white(self, frame: '_Frame', H: np.ndarray) -> Optional[np.ndarray]:
         """Median colour of the card's paper at points between the dots."""
         pts = _apply_h(H, self._white_xy)
-        if frame.camera is not None:
+        if frame.camera is not None and frame.camera.has_distortion:
             pts = _distort_pixels(frame.camera, pts)
         h, w = frame.image.shape[:2]
         inside = (pts[:, 0] >= 1) & (pts[:, 0] < w - 1) & (pts[:, 1] >= 1) & (pts[:, 1] < h - 1)
@@ -622,10 +627,8 @@ class _Frame:
         x0, y0 = self._roi_origin
         pick = own > 0
         ids = own[pick].astype(np.intp) - 1
-        pix = self.image[y0:y0 + own.shape[0], x0:x0 + own.shape[1]][pick].astype(np.float32)
-        # In linear light a blurred dot is a mix of ink and paper, so the ratios
-        # between channels of its darkness do not depend on its size or blur.
-        dark = 1.0 - np.clip(pix / ref_white, 0.0, 1.0) ** gamma
+        pix = self.image[y0:y0 + own.shape[0], x0:x0 + own.shape[1]][pick]
+        dark = linear_darkness(pix, ref_white, gamma)
         strength = dark.max(axis=1)
         m = len(js)
         # The core: each dot's pixels darker than its mean (blur mixes the rim
@@ -635,6 +638,19 @@ class _Frame:
         count = np.maximum(np.bincount(ids[core], minlength=m), 1)
         return np.column_stack([np.bincount(ids[core], dark[core, c], m) / count
                                 for c in range(3)])
+
+
+def linear_darkness(pixels: np.ndarray, white: np.ndarray, gamma: float) -> np.ndarray:
+    """
+    Return 1 - colour / white per channel in linear light, for uint8 pixels (N, 3).
+
+    In linear light a blurred dot is a mix of ink and paper, so the ratios
+    between the channels of its darkness do not depend on its size or blur.
+    A lookup table per channel makes this cheap.
+    """
+    levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
+    table = 1.0 - np.clip(levels, 0.0, 1.0) ** gamma          # (256, 3)
+    return np.column_stack([table[pixels[:, c], c] for c in range(3)])
 
 
 def _colour_directions(config: PatternConfig) -> np.ndarray:

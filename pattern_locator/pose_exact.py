@@ -18,6 +18,7 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
 """
 
 from dataclasses import dataclass
+import functools
 import math
 from typing import Optional, Tuple
 
@@ -101,8 +102,8 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     if np.count_nonzero(seen) < MIN_POINTS:
         raise EstimationError(f'need at least {MIN_POINTS} dots for a pose, got '
                               f'{np.count_nonzero(seen)}')
-    obj = config.model_points()[seen]
-    radii = config.dot_radii()[seen]
+    obj = _model_points(config)[seen]
+    radii = _dot_radii(config)[seen]
     observed = camera.undistort_pixels(points_px[seen])
     K = camera.K
 
@@ -137,7 +138,8 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     residual = np.linalg.norm(_project(obj, rvec, tvec, K) - corrected, axis=1)
     # A dot partly hidden by an occluder or merged with a neighbour keeps a
     # centre far off the others' fit: drop it and solve again.
-    outliers = residual > max(MIN_OUTLIER_PX, OUTLIER_FACTOR * float(np.median(residual)))
+    median = float(np.partition(residual, n // 2)[n // 2])
+    outliers = residual > max(MIN_OUTLIER_PX, OUTLIER_FACTOR * median)
     if np.any(outliers) and n - np.count_nonzero(outliers) >= MIN_POINTS:
         cleaned = points_px.copy()
         cleaned[np.flatnonzero(seen)[outliers]] = np.nan
@@ -225,6 +227,16 @@ def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternCon
 
 
 # Internals -----------------------------------------------------------------
+
+@functools.lru_cache(maxsize=8)
+def _model_points(config: PatternConfig) -> np.ndarray:
+    return config.model_points()
+
+
+@functools.lru_cache(maxsize=8)
+def _dot_radii(config: PatternConfig) -> np.ndarray:
+    return config.dot_radii()
+
 
 def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
     try:

@@ -1,0 +1,52 @@
+"""The benchmark's machinery on a handful of scenes (accuracy only; nothing is timed)."""
+
+import math
+
+import numpy as np
+from pattern_locator import bench
+from pattern_locator.pattern import load_pattern_config
+import pytest
+
+
+@pytest.fixture(scope='module')
+def results():
+    config = load_pattern_config()
+    scenes = bench.make_scenes(config, 1, seed=5)
+    return scenes, bench.run_scenes(scenes, config, progress=False)
+
+
+def test_scenes_cover_both_cameras_and_every_distance_bin(results):
+    scenes, _ = results
+    assert {s.camera_name for s in scenes} == set(bench.bench_cameras())
+    for s in scenes:
+        near, far = bench.DISTANCE_BINS[s.bin_index]
+        assert near <= s.distance <= far and 0.0 <= s.view_angle <= 70.0
+
+
+def test_every_marker_ran_on_every_scene(results):
+    scenes, res = results
+    for marker in bench.MARKERS:
+        assert len(res[marker]) == len(scenes)
+        assert all(not math.isnan(o.time_ms) for _, o in res[marker])
+
+
+def test_dot_cards_are_found_near_and_never_misread(results):
+    _, res = results
+    near = [o for s, o in res['dots'] if s.bin_index <= 2]
+    assert all(o.found for o in near)
+    assert sum(o.wrong_ids for _, o in res['dots']) == 0
+    for s, o in res['dots']:
+        if o.found:
+            # Within 2 % of the distance, and the bound machinery produced samples.
+            assert o.position_error < 0.02 * s.distance
+            assert o.crb_samples is not None and np.all(np.isfinite(o.crb_samples))
+
+
+def test_tables_name_every_bin_and_marker(results):
+    _, res = results
+    text = '\n'.join(bench.accuracy_table(res, name) for name in bench.bench_cameras())
+    for near, far in bench.DISTANCE_BINS:
+        assert f'{near:g}-{far:g}' in text
+    for marker in bench.MARKERS:
+        assert marker in text
+    assert 'Planar flips' in bench.flip_table(res)

@@ -341,14 +341,16 @@ class Detector:
         tol_radius = np.full(len(obj), self.config.ring_dot_radius)
         tol_radius[-1] = self.config.centre_dot_radius
         inliers = np.ones(len(obj), dtype=bool)
+        tol = None
         for _ in range(3):
             H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
             if H is None:
                 return None, None
             err = np.linalg.norm(_apply_h(H, obj) - img, axis=1)
-            # Tolerance relative to each dot's image radius.
-            tol = np.maximum(self.params.max_homography_error * _h_scale(H, obj) * tol_radius,
-                             0.75)
+            if tol is None:
+                # Tolerance relative to each dot's image radius.
+                tol = np.maximum(self.params.max_homography_error * _h_scale(H, obj)
+                                 * tol_radius, 0.75)
             now = err < tol
             if np.count_nonzero(now) < 6 or not now[-1]:
                 return None, None
@@ -544,7 +546,8 @@ class Detector:
             return None
         xs = np.round(pts[:, 0]).astype(int)
         ys = np.round(pts[:, 1]).astype(int)
-        white = np.median(frame.image[ys, xs].astype(np.float32), axis=0)
+        samples = np.sort(frame.image[ys, xs], axis=0)
+        white = samples[len(samples) // 2].astype(np.float32)     # median per channel
         if np.max(white) < self.params.min_white:
             return None
         return np.maximum(white, 1.0)
@@ -713,11 +716,14 @@ def _apply_h(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 def _h_scale(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Local image scale (px per metre) of the homography at plane points."""
-    eps = 1e-3
-    a = _apply_h(H, xy)
-    bx = _apply_h(H, xy + [eps, 0.0])
-    by = _apply_h(H, xy + [0.0, eps])
-    return np.sqrt(np.linalg.norm(bx - a, axis=1) * np.linalg.norm(by - a, axis=1)) / eps
+    p = np.column_stack([xy[:, 0], xy[:, 1], np.ones(len(xy))]) @ H.T
+    u, v, w = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2], p[:, 2]
+    # Jacobian of (u, v) with respect to (x, y), divided by w.
+    a = H[0, 0] - u * H[2, 0]
+    b = H[0, 1] - u * H[2, 1]
+    c = H[1, 0] - v * H[2, 0]
+    d = H[1, 1] - v * H[2, 1]
+    return np.sqrt(np.abs(a * d - b * c)) / np.abs(w)
 
 
 def _rotation_about_z(angle: float) -> np.ndarray:

@@ -7,6 +7,7 @@ Errors a user can cause end as one readable line on stderr and exit status 2.
 import argparse
 import json
 import math
+import os
 from pathlib import Path
 import sys
 import time
@@ -35,6 +36,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # The reader went away (`... | head`): stop quietly, as Unix tools do.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 def _error(message: str) -> None:
@@ -140,9 +146,16 @@ def _read_image(name: str):
     path = Path(name)
     if not path.is_file():
         return f'{name}: no such image file'
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         return f'{name}: cannot decode image (not a PNG/JPEG/... file, or corrupt)'
+    if image.dtype == np.uint16:
+        image = (image >> 8).astype(np.uint8)
+    if image.dtype != np.uint8:
+        return f'{name}: unsupported pixel type {image.dtype} (use 8 or 16 bits)'
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    # A grey image is kept grey: the detector finds the geometry, not the code.
     return image
 
 

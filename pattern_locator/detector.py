@@ -50,12 +50,13 @@ class DetectorParams:
     min_dot_area: int = 3           # pixels
     max_dot_area_fraction: float = 0.05   # of the image
     min_ellipse_fill: float = 0.55  # blob area / area of its moment ellipse (convex, round)
-    max_homography_error: float = 0.35    # in units of the dot's image radius
+    max_homography_error: float = 0.25    # in units of the dot's image radius
     gamma: float = 2.2              # the camera's encoding; colours are compared in linear light
     max_black_chroma: float = 0.12  # chromatic part of a black dot's darkness, at most
     min_colour_chroma: float = 0.04     # a coloured dot's chromatic part, at least
     min_colour_chroma_ratio: float = 2.0    # ...and this many times the black's
     min_colour_margin: float = 0.2  # cosine to its colour minus cosine to the next
+    min_black_centre: float = 0.8   # a black centre is at least this dark relative to point 1
     min_darkness: float = 0.25      # a dot darker than the card by less than this is unreadable
     min_window_darkness: float = 0.12   # a dot measured in a window must be this dark
 
@@ -148,8 +149,11 @@ class Detector:
         bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
         # Round dots fill a good part of their box and are not long and thin
         # (a 75-degree tilt makes a dot about 4:1).
+        x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
         keep = ((area >= p.min_dot_area) & (area <= p.max_dot_area_fraction * h * w)
-                & (area * 4 >= bw * bh) & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2))
+                & (area * 4 >= bw * bh) & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
+                # A dot cut by the image border has a false centre.
+                & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
         keep[0] = False
         idx = np.flatnonzero(keep)
         return _Frame(image, darkest, small, step, labels, n, camera, image.ndim == 2,
@@ -173,8 +177,8 @@ class Detector:
                  & (ratio > 0.06) & (ratio < 1.0))
         np.fill_diagonal(close, False)
         candidates = np.flatnonzero(close.sum(axis=1) >= RING_POINTS)
-        # Ring dots surround their centre: they fall in most of the eight
-        # octants around it (a row of letters falls in two).
+        # Ring dots surround their centre: they fall in at least four of the
+        # eight octants around it, even seen edge-on (a row of letters: two).
         octant = (np.floor((np.arctan2(dv, du) + np.pi) / (np.pi / 4)).astype(int)) % 8
         surrounded = []
         for i in candidates:
@@ -183,7 +187,7 @@ class Detector:
             typical = np.median(ring_areas)
             alike = (ring_areas > 0.4 * typical) & (ring_areas < 2.5 * typical)
             if (np.count_nonzero(alike) >= RING_POINTS
-                    and len(np.unique(octant[i][close[i]][alike])) >= 5):
+                    and len(np.unique(octant[i][close[i]][alike])) >= 4):
                 surrounded.append(i)
         return sorted(surrounded, key=lambda i: -frame.area[i])
 
@@ -288,23 +292,37 @@ class Detector:
                 slot_blob[ring, k] = -1
         # Look again for missing dots where the homography puts them.
         self._fill_missing(frame, H, slot_blob, ci)
+        if not self._sizes_fit(frame, H, slot_blob, ci):
+            return None
         added = [j for j in slot_blob[slot_blob >= 0].tolist() if j not in centres]
         if added:
             centres.update(zip(added, frame.centroids(added)))
+            self._check_added(frame, H, slot_blob, added, centres)
         # Dots still missing may be too faint to segment, or merged with their
         # neighbour on the other ring (far away, tilted): measure them in a
         # window where the homography puts them.
         windows = self._window_dots(frame, H, slot_blob) if np.any(slot_blob < 0) else {}
-        filled = slot_blob >= 0
-        for ring, k in windows:
-            filled[ring, k] = True
-        complete = [ring for ring in range(n_rings) if np.all(filled[ring])]
-        if not complete:
-            return None
         if frame.grey_only:
             point1_slot, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
         else:
-            read = self._read_colours(frame, H, slot_blob, ci, windows)
+            # If the colours do not add up, a window may have measured an object
+            # over a dot, or an incomplete ring hold a stray blob: read again
+            # without them before giving up.
+            for attempt in range(3):
+                if attempt == 1:
+                    if not windows:
+                        continue
+                    windows = {}
+                if attempt == 2:
+                    partial = ~np.all(slot_blob >= 0, axis=1)
+                    if not np.any(partial) or np.all(partial):
+                        break
+                    slot_blob[partial] = -1
+                if not self._complete_rings(slot_blob, windows):
+                    return None
+                read = self._read_colours(frame, H, slot_blob, ci, windows)
+                if read is not None:
+                    break
             if read is None:
                 return None
             point1_slot, code, margin, ring_codes = read
@@ -312,6 +330,9 @@ class Detector:
                 ids = cfg.decode(code)
             except CodeError:
                 return None
+        complete = self._complete_rings(slot_blob, windows)
+        if not complete:
+            return None
         points = np.full((cfg.n_dots, 2), np.nan)
         areas = np.full(cfg.n_dots, np.nan)
         points[0] = centres[ci]
@@ -358,6 +379,53 @@ class Detector:
                 break
             inliers = now
         return H, inliers
+
+    def _check_added(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray,
+                     added: List[int], centres: dict) -> None:
+        """Drop recovered dots whose measured centre is off the homography (in place)."""
+        for ring, k in np.argwhere(np.isin(slot_blob, added)):
+            model = self._model[self.config.dot_index(int(ring), int(k) + 1)][None]
+            centre = centres[slot_blob[ring, k]][None]
+            if frame.camera is not None:
+                centre = frame.camera.undistort_pixels(centre)
+            tol = max(0.75, self.params.max_homography_error * float(_h_scale(H, model)[0])
+                      * self.config.ring_dot_radius)
+            if np.linalg.norm(_apply_h(H, model)[0] - centre[0]) > tol:
+                slot_blob[ring, k] = -1
+
+    @staticmethod
+    def _complete_rings(slot_blob: np.ndarray, windows: dict) -> List[int]:
+        filled = slot_blob >= 0
+        for ring, k in windows:
+            filled[ring, k] = True
+        return [ring for ring in range(slot_blob.shape[0]) if np.all(filled[ring])]
+
+    def _sizes_fit(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray,
+                   ci: int) -> bool:
+        """
+        Drop ring dots whose blob is far from the size the homography predicts.
+
+        A dark object over a dot, or a dot merged with a neighbour, is a blob
+        too big for one dot: its centre and colour are not the dot's. Returns
+        False when the centre blob itself does not fit (the card is rejected).
+        """
+        cfg = self.config
+        pos = np.argwhere(slot_blob >= 0)
+        model = np.array([self._model[0]] + [self._model[cfg.dot_index(int(r), int(k) + 1)]
+                                             for r, k in pos])
+        radius = _h_scale(H, model) * np.array(
+            [cfg.centre_dot_radius] + [cfg.ring_dot_radius] * len(pos))
+        predicted = np.pi * radius ** 2
+        measured = frame.area[np.concatenate([[ci], slot_blob[slot_blob >= 0]])]
+        ratio = measured / predicted
+        # Small dots are left alone: blur and thresholding change their area most.
+        judged = predicted >= 12.0
+        if judged[0] and not 0.25 <= ratio[0] <= 2.0:
+            return False
+        for (r, k), ok, bad in zip(pos, judged[1:], (ratio[1:] > 2.4) | (ratio[1:] < 0.2)):
+            if ok and bad:
+                slot_blob[r, k] = -1
+        return True
 
     def _fill_missing(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray,
                       ci: int) -> None:
@@ -409,10 +477,10 @@ class Detector:
             px, py = pred[i]
             r = max(1.5, radius[i] + 0.5)
             outer = 2.0 * r      # the paper around a dot must be lighter than the dot
-            x0, x1 = max(0, int(px - outer)), min(w, int(px + outer) + 2)
-            y0, y1 = max(0, int(py - outer)), min(h, int(py + outer) + 2)
-            if x1 - x0 < 2 or y1 - y0 < 2:
-                continue
+            x0, x1 = int(px - outer), int(px + outer) + 2
+            y0, y1 = int(py - outer), int(py + outer) + 2
+            if x0 < 1 or y0 < 1 or x1 > w - 1 or y1 > h - 1:
+                continue        # cut by the image border: its centre would be false
             yy, xx = np.mgrid[y0:y1, x0:x1]
             d2 = (xx - px) ** 2 + (yy - py) ** 2
             others = np.delete(pred, i, axis=0)
@@ -436,10 +504,12 @@ class Detector:
                 continue
             cx = float((dark * xx).sum()) / total
             cy = float((dark * yy).sum()) / total
-            if np.hypot(cx - px, cy - py) > max(1.0, 0.6 * radius[i]):
+            tolerance = max(0.75, self.params.max_homography_error * radius[i])
+            if np.hypot(cx - px, cy - py) > tolerance:
                 continue
-            core = dark >= dark[cell].mean()
-            out[ring, k] = (np.array([cx, cy]), yy[core & cell], xx[core & cell])
+            core = cell & (dark >= dark[cell].mean())
+            if np.any(core):
+                out[ring, k] = (np.array([cx, cy]), yy[core], xx[core])
         return out
 
     # Colours ---------------------------------------------------------------
@@ -518,7 +588,12 @@ class Detector:
         margins = [weakest_colour - black] + slot_margin[colour_slot].tolist()
         # The centre: black if it is as grey as point 1 (nearer to it than to
         # the weakest colour), else its nearest colour.
+        slot_top = np.full((n_rings, RING_POINTS), np.nan)
+        slot_top[assigned] = measured[1:].max(axis=1)
         if strength[0] <= 0.5 * (black + weakest_colour):
+            # Black ink, not a grey object over the centre: as dark as point 1.
+            if measured[0].max() < p.min_black_centre * np.nanmax(slot_top[:, point1]):
+                return None
             centre_letter = 'K'
         elif margin[0] >= p.min_colour_margin and strength[0] >= p.min_colour_chroma:
             centre_letter = 'RGB'[letter[0]]

@@ -145,9 +145,6 @@ def test_detector_measures_the_ellipse_centre_not_the_projected_centre():
     assert np.linalg.norm(card.points_px[0] - projected) > 0.1
 
 
-@pytest.mark.xfail(strict=True, reason='steep views fail at some rolls: the centre candidate '
-                   'filter wants ring dots in >= 5 of 8 octants, a thin ellipse whose long '
-                   'axis is at 22.5 deg + k 45 deg fills only 4')
 @pytest.mark.parametrize('tilt', [66.0, 70.0])
 def test_steep_view_at_any_roll(tilt):
     # Found at roll 0 and 45 (the VIEWS above), missed at 22.5: big dots, 2 m.
@@ -271,9 +268,8 @@ POINT7 = CFG.model_points()[CFG.dot_index(0, 7), :2]
     ((0.8, 0.8, 0.75), POINT7 + square(0.02)),     # pale: the dot just disappears
     # Dark but much bigger than a dot (56 mm): not taken for one.
     ((0.35, 0.3, 0.28), POINT7 + [-0.005, 0.0] + square(0.028)),
-    pytest.param((0.35, 0.3, 0.28), POINT7 + square(0.02), marks=pytest.mark.xfail(
-        strict=True, reason='a dark dot-sized object over one outer dot is taken for a '
-        'second black point and the whole card is lost, though the inner ring is complete')),
+    # Dark and dot-sized: must not be taken for a second black point.
+    ((0.35, 0.3, 0.28), POINT7 + square(0.02)),
 ])
 def test_small_object_over_one_outer_dot(colour, polygon):
     # An object over outer point 7 (a 28 mm dot) and nothing else.
@@ -289,20 +285,16 @@ def test_small_object_over_one_outer_dot(colour, polygon):
 
 WHITE = (0.85, 0.85, 0.85)
 GREY = (0.35, 0.3, 0.28)
-MISREAD = pytest.mark.xfail(strict=True, reason='a grey square over the centre dot is read as '
-                            'a black centre dot')
 
 
 @pytest.mark.parametrize('centre, colour', [
-    ('K', WHITE), ('R', WHITE), ('B', WHITE), ('K', GREY),
-    pytest.param('R', GREY, marks=MISREAD), pytest.param('B', GREY, marks=MISREAD),
+    ('K', WHITE), ('R', WHITE), ('B', WHITE), ('K', GREY), ('R', GREY), ('B', GREY),
 ])
 def test_occluded_centre_is_never_misread(centre, colour):
     # A 60 mm square (the centre dot is 48 mm across) hides the centre dot. A
     # white one leaves no centre blob; a grey one is 1.6 times the dot's area,
-    # square and far paler than ink (reflectance 0.3 against 0.03), yet is
-    # taken for a black centre dot: the floor is misread (xfail cases). Only
-    # when the hidden dot really was black is that a right code by chance.
+    # square and far paler than ink (reflectance 0.3 against 0.03): it must
+    # not be taken for a black centre dot, which would misread the floor.
     code = Code.parse(f'{centre}-{CODE.ring}')
     T = card_pose_facing(2.0, 30.0, 40.0, 10.0, (30.0, -20.0), VGA)
     result = render(VGA, [(T, code)], seed=1, occluders=(Occluder(0, square(0.03), colour),))
@@ -311,8 +303,6 @@ def test_occluded_centre_is_never_misread(centre, colour):
         assert card.code == code
 
 
-@pytest.mark.xfail(strict=True, reason='a dot half hidden by a pale occluder is kept with a '
-                   'centre 2 px off instead of being dropped')
 def test_half_hidden_dot_is_dropped_not_shifted():
     # A pale edge (paper white) along x = -0.113 m hides half of outer point 7.
     polygon = np.array([[-0.3, -0.3], [-0.113, -0.3], [-0.113, 0.3], [-0.3, 0.3]])
@@ -338,8 +328,6 @@ def across_right_border(distance, tilt, azimuth, out_px):
     return T
 
 
-@pytest.mark.xfail(strict=True, reason='dots cut by the image border are kept with centres '
-                   'pixels off (the centroid of the visible part)')
 @pytest.mark.parametrize('out_px', [-2.0, 2.0])
 def test_dot_cut_by_the_image_border_is_dropped_not_shifted(out_px):
     # Card at 1.5 m, its outer point 3 (9 px radius) across the right image

@@ -204,9 +204,6 @@ def test_card_cut_by_the_image_border(cut_by_border):
     assert np.linalg.norm(card.camera_in_pattern - T.inverse().t) < 0.005 * 1.5
 
 
-@pytest.mark.xfail(strict=True, reason='the cut dot, 3 px off, counts as seen: the outer ring '
-                   'is "complete" and the paper estimator fits its conic through it (phi 3 deg '
-                   'and the position 6 % of the distance out)')
 def test_paper_estimator_on_a_card_cut_by_the_image_border(cut_by_border):
     T, image = cut_by_border
     card = only_card(PAPER, image, VGA)

@@ -184,7 +184,7 @@ class Detector:
         for i in candidates:
             ring_areas = frame.area[close[i]]
             # Ring dots are all the same size (within blur and perspective).
-            typical = np.median(ring_areas)
+            typical = np.partition(ring_areas, len(ring_areas) // 2)[len(ring_areas) // 2]
             alike = (ring_areas > 0.4 * typical) & (ring_areas < 2.5 * typical)
             if (np.count_nonzero(alike) >= RING_POINTS
                     and len(np.unique(octant[i][close[i]][alike])) >= 4):
@@ -553,15 +553,16 @@ class Detector:
         chroma = measured - measured.mean(axis=1, keepdims=True)
         strength = np.linalg.norm(chroma, axis=1) / measured.max(axis=1)
         # Slot of point 1: the least chromatic on average over the rings.
-        slot_strength = np.full((n_rings, RING_POINTS), np.nan)
+        slot_strength = np.zeros((n_rings, RING_POINTS))
         slot_strength[assigned] = strength[1:]
-        mean_strength = np.nanmean(slot_strength, axis=0)
-        if np.any(np.isnan(mean_strength)):
+        count = assigned.sum(axis=0)
+        if np.any(count == 0):
             return None
-        point1 = int(np.argmin(mean_strength))
-        black = float(np.nanmax(slot_strength[:, point1]))
-        others = np.delete(slot_strength, point1, axis=1)
-        weakest_colour = float(np.nanmin(others))
+        point1 = int(np.argmin(slot_strength.sum(axis=0) / count))
+        black = float(slot_strength[assigned[:, point1], point1].max())
+        others = assigned.copy()
+        others[:, point1] = False
+        weakest_colour = float(slot_strength[others].min())
         if black > p.max_black_chroma or weakest_colour < p.min_colour_chroma_ratio * black \
                 or weakest_colour < p.min_colour_chroma:
             return None
@@ -588,11 +589,11 @@ class Detector:
         margins = [weakest_colour - black] + slot_margin[colour_slot].tolist()
         # The centre: black if it is as grey as point 1 (nearer to it than to
         # the weakest colour), else its nearest colour.
-        slot_top = np.full((n_rings, RING_POINTS), np.nan)
+        slot_top = np.zeros((n_rings, RING_POINTS))
         slot_top[assigned] = measured[1:].max(axis=1)
         if strength[0] <= 0.5 * (black + weakest_colour):
             # Black ink, not a grey object over the centre: as dark as point 1.
-            if measured[0].max() < p.min_black_centre * np.nanmax(slot_top[:, point1]):
+            if measured[0].max() < p.min_black_centre * slot_top[:, point1].max():
                 return None
             centre_letter = 'K'
         elif margin[0] >= p.min_colour_margin and strength[0] >= p.min_colour_chroma:

@@ -257,7 +257,7 @@ def run_tag(tag_locator, camera: CameraModel, scene: Scene, image: np.ndarray, T
 
 
 def _is_flip(chosen: Pose, other: Optional[Pose], T: Pose, distance: float) -> bool:
-    """The chosen planar solution is far off (> 5 % of D) where the other was right."""
+    """Tell whether the chosen planar solution is far off (> 5 % of D) and the other right."""
     if other is None:
         return False
     truth = T.inverse().t

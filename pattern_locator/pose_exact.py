@@ -113,8 +113,9 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     n = len(obj)
     rms = [math.sqrt(c[0] / n) for c in candidates]
     ambiguity = rms[1] / max(rms[0], 1e-9) if len(candidates) > 1 else math.inf
-    if ambiguity < ambiguity_threshold:
-        # A close call: compare the two at their own optimum.
+    if ambiguity < ambiguity_threshold and prior is None:
+        # A close call decided by the image alone: compare the two at their
+        # own optimum. (With a prior, IPPE's residuals are close enough.)
         candidates = sorted((_refined_candidate(obj, observed, K, r, t)
                              for _, r, t in candidates), key=lambda sol: sol[0])
         rms = [math.sqrt(c[0] / n) for c in candidates]

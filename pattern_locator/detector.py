@@ -35,7 +35,7 @@ import numpy as np
 
 from .camera import CameraModel
 from .errors import CodeError, ImageError
-from .pattern import Code, Ids, PatternConfig, RING_POINTS
+from .pattern import Code, Ids, PatternConfig, RING_POINTS, srgb_to_linear
 
 LOG = logging.getLogger(__name__)
 
@@ -736,9 +736,7 @@ def _colour_directions(config: PatternConfig) -> np.ndarray:
     """Return the unit chromatic directions (rows R, G, B; columns B, G, R) of the inks."""
     rows = []
     for letter in 'RGB':
-        srgb = np.array(config.colour_rgb(letter)[::-1], dtype=float) / 255.0
-        linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
-        dark = 1.0 - linear
+        dark = 1.0 - srgb_to_linear(config.colour_rgb(letter)[::-1])
         chroma = dark - dark.mean()
         rows.append(chroma / np.linalg.norm(chroma))
     return np.array(rows)

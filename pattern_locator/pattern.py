@@ -214,6 +214,12 @@ class PatternConfig:
                     yield Ids(floor, room, pattern), self.encode(floor, room, pattern)
 
 
+def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
+    """Return linear values in [0, 1] of 8-bit sRGB values (the standard sRGB curve)."""
+    c = np.asarray(srgb, dtype=np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
 def _validate(cfg: PatternConfig) -> None:
     if not cfg.ring_radii:
         raise ConfigError('pattern: ring_radii must list at least one ring radius')

@@ -36,7 +36,7 @@ import numpy as np
 from .camera import CameraModel
 from .errors import CodeError, ConfigError, ImageError
 from .geometry import look_at, Pose, rodrigues
-from .pattern import Code, PatternConfig
+from .pattern import Code, PatternConfig, srgb_to_linear
 
 BACKGROUNDS = ('wall', 'clutter', 'black', 'white')
 # Surfaces closer than this to the camera plane (metres) are not rendered.
@@ -47,12 +47,6 @@ BACK_REFLECTANCE = 0.7
 _CHUNK_SAMPLES = 1 << 18
 # Points per dot disc for the visible-fraction truth (sunflower spiral).
 _DISC_SAMPLES = 1024
-
-
-def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
-    """Linear values in [0, 1] of 8-bit sRGB values (the standard sRGB curve)."""
-    c = np.asarray(srgb, dtype=np.float64) / 255.0
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def ink_reflectance(srgb: np.ndarray, paper_white: float = 0.85,

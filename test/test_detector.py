@@ -496,3 +496,13 @@ def test_size_and_homography(camera, distance, tilt, offset):
     # Point 1 up: +y of the plane maps towards point 1.
     assert max_error(apply_homography(H, np.array([[0.0, CFG.ring_radii[0]]])),
                      camera.undistort_pixels(truth.dot_pixels[[1]])) < 0.5
+
+
+@pytest.mark.parametrize('roll', [0.0, 22.5, 100.0, 250.0])
+def test_tilt_of_75_degrees(roll):
+    # The limit: a card seen 75 degrees off its normal, at 2 m.
+    T = card_pose_facing(2.0, 75.0, 40.0, roll, (0.0, 0.0), VGA)
+    result = render(VGA, [(T, CODE)], seed=3)
+    card = only_card(result.image, VGA)
+    assert card.code == CODE
+    assert card.complete_rings == (0, 1)

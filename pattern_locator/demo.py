@@ -102,7 +102,7 @@ def summary_table(results: List[StopResult]) -> str:
                       ('smallest', np.min)):
         values = [fn([r[k] for r in rows]) if rows else math.nan for k in PAPER_TABLE1]
         lines.append(f'{label:<12}' + ''.join(f'{v:>13.2f}' for v in values))
-    for i, label in enumerate(('paper avg', 'paper std', 'paper max')):
+    for i, label in enumerate(('Table 1 avg', 'Table 1 std', 'Table 1 max')):
         lines.append(f'{label:<12}' + ''.join(f'{PAPER_TABLE1[k][i]:>13.2f}'
                                               for k in PAPER_TABLE1))
     return '\n'.join(lines)

@@ -426,19 +426,19 @@ def paper_table(config: PatternConfig, n: int, seed: int) -> str:
     keys = list(PAPER_TABLE1)
     lines = [f"\n### The paper's setup (f = 25 mm, 640x480, 1.25-8 m, phi >= 25 deg, "
              f'{n} images): absolute errors',
-             f'{"":<22}' + ''.join(f'{k:>12}' for k in keys)]
+             f'{"":<28}' + ''.join(f'{k:>12}' for k in keys)]
     for name in locators:
         rows = errors[name]
         title = f'{name} estimator'
         for label, fn in (('mean', np.mean), ('std', np.std), ('max', np.max)):
             vals = [fn([r[k] for r in rows]) if rows else math.nan for k in keys]
-            lines.append(f'{f"{title} {label}":<22}' + ''.join(_fmt(v, 2, 12) for v in vals))
+            lines.append(f'{f"{title} {label}":<28}' + ''.join(_fmt(v, 2, 12) for v in vals))
         means = [np.mean([r[k] for r in rows]) if rows else math.nan for k in keys]
-        lines.append(f'{f"{title} mean/Tab.1":<22}' + ''.join(
+        lines.append(f'{f"{title} mean/Tab.1":<28}' + ''.join(
             _fmt(m / PAPER_TABLE1[k][0], 2, 12) for m, k in zip(means, keys)))
-        lines.append(f'{f"{title} missed":<22}{missed[name]:>12}')
+        lines.append(f'{f"{title} missed":<28}{missed[name]:>12}')
     for i, label in enumerate(('Table 1 mean', 'Table 1 std', 'Table 1 max')):
-        lines.append(f'{label:<22}' + ''.join(f'{PAPER_TABLE1[k][i]:>12.2f}' for k in keys))
+        lines.append(f'{label:<28}' + ''.join(f'{PAPER_TABLE1[k][i]:>12.2f}' for k in keys))
     return '\n'.join(lines)
 
 

@@ -102,6 +102,8 @@ class Detector:
         # Expected ring radii in units of the centre dot radius.
         self._ring_rho = np.array(config.ring_radii) / config.centre_dot_radius
         self._white_xy = _white_sample_points(config)
+        # Plane position of slot k of ring r, slot k taken as point k + 1.
+        self._slot_xy = self._model[1:].reshape(config.n_rings, RING_POINTS, 2)
         self._colour_directions = _colour_directions(config)
 
     # Public ----------------------------------------------------------------
@@ -186,8 +188,8 @@ class Detector:
             # Ring dots are all the same size (within blur and perspective).
             typical = np.partition(ring_areas, len(ring_areas) // 2)[len(ring_areas) // 2]
             alike = (ring_areas > 0.4 * typical) & (ring_areas < 2.5 * typical)
-            if (np.count_nonzero(alike) >= RING_POINTS
-                    and len(np.unique(octant[i][close[i]][alike])) >= 4):
+            if (np.count_nonzero(alike) >= RING_POINTS and np.count_nonzero(
+                    np.bincount(octant[i][close[i]][alike], minlength=8)) >= 4):
                 surrounded.append(i)
         return sorted(surrounded, key=lambda i: -frame.area[i])
 
@@ -280,8 +282,7 @@ class Detector:
         # the colours say which is) to undistorted pixels, to verify the geometry.
         pos = [(ring, k) for ring in range(n_rings) for k in range(RING_POINTS)
                if slot_blob[ring, k] >= 0]
-        obj = np.array([self._model[cfg.dot_index(ring, k + 1)] for ring, k in pos]
-                       + [self._model[0]])
+        obj = np.vstack([self._slot_xy[tuple(np.array(pos).T)], self._model[:1]])
         img = np.array([centres[slot_blob[ring, k]] for ring, k in pos] + [centres[ci]])
         und = camera.undistort_pixels(img) if camera is not None else img
         H, inliers = self._fit_homography(obj, und)
@@ -410,21 +411,20 @@ class Detector:
         False when the centre blob itself does not fit (the card is rejected).
         """
         cfg = self.config
-        pos = np.argwhere(slot_blob >= 0)
-        model = np.array([self._model[0]] + [self._model[cfg.dot_index(int(r), int(k) + 1)]
-                                             for r, k in pos])
-        radius = _h_scale(H, model) * np.array(
-            [cfg.centre_dot_radius] + [cfg.ring_dot_radius] * len(pos))
+        assigned = slot_blob >= 0
+        model = np.vstack([self._model[:1], self._slot_xy[assigned]])
+        radius = _h_scale(H, model)
+        radius[0] *= cfg.centre_dot_radius
+        radius[1:] *= cfg.ring_dot_radius
         predicted = np.pi * radius ** 2
-        measured = frame.area[np.concatenate([[ci], slot_blob[slot_blob >= 0]])]
-        ratio = measured / predicted
+        ratio = frame.area[np.concatenate([[ci], slot_blob[assigned]])] / predicted
         # Small dots are left alone: blur and thresholding change their area most.
         judged = predicted >= 12.0
         if judged[0] and not 0.25 <= ratio[0] <= 2.0:
             return False
-        for (r, k), ok, bad in zip(pos, judged[1:], (ratio[1:] > 2.4) | (ratio[1:] < 0.2)):
-            if ok and bad:
-                slot_blob[r, k] = -1
+        misfit = judged[1:] & ((ratio[1:] > 2.4) | (ratio[1:] < 0.2))
+        rows, cols = np.nonzero(assigned)
+        slot_blob[rows[misfit], cols[misfit]] = -1
         return True
 
     def _fill_missing(self, frame: '_Frame', H: np.ndarray, slot_blob: np.ndarray,

@@ -1,33 +1,32 @@
 """
 Find colour-dot cards in a BGR image: dots -> cards -> ordered points -> code.
 
-The steps, each cheap enough for full frame rate:
-
 1. **Dots.** Every dot, black or coloured, is dark in at least one channel
-   against the white card, whatever the light's colour, so the per-pixel
+   against the white card whatever the light's colour, so the per-pixel
    minimum over B, G, R is thresholded against the local white (a max
-   filter on a decimated image). Connected components with their moments
-   give blobs with a centroid and an equivalent ellipse.
-2. **Cards.** A card is a centre blob with two rings of 8 blobs around it.
-   The centre blob's own ellipse gives the local affine shape of the card;
-   in that normalised frame the rings are near circles of radii
-   ``R / r_centre`` at 45 degree steps. A vote over neighbours finds the
-   scale and the angle of the slots; a homography fitted to the assigned
-   dots (in undistorted coordinates when the camera is known) verifies the
-   card and recovers dots the first pass missed.
-3. **Order and code.** Colours are read against the card's own white
-   (sampled between the dots, which cancels the light's colour) and the
-   card's black point 1; exactly one black point per ring marks point 1,
-   and points follow clockwise as seen from the front (a card is never
-   seen from behind). Both rings must agree; a card whose colours are not
-   clear is rejected, never guessed.
-4. **Sub-pixel centres.** Darkness-weighted centroids over each dot's
-   neighbourhood: the centre of the dot's image ellipse, which the exact
-   estimator corrects to the projected circle centre.
+   filter on a decimated image) and labelled in connected components.
+2. **Cards.** A centre candidate is a blob with at least eight blobs of one
+   size around it, on at least four sides. In the centre blob's own affine
+   frame the rings are near circles of radii ``R / r_centre``; a vote gives
+   their scale and the angle of the 45-degree slots. A homography fitted to
+   the assigned dots (undistorted when the camera is known) verifies the
+   card, drops dots off the fit or of the wrong size, recovers dots the
+   first pass missed, and measures faint or merged dots of a distant card
+   in windows where it predicts them. Dots cut by the image border are
+   never used.
+3. **Order and code.** Colours are read in linear light against the card's
+   own white (sampled between the dots, which cancels coloured light):
+   point 1 is the least chromatic slot, clearly so; every other dot takes
+   the printed colour whose chromatic direction is nearest. Points follow
+   clockwise as seen from the front (a card is never seen from behind).
+   Both rings must agree; a card whose colours are unclear is rejected,
+   never guessed.
+4. **Sub-pixel centres.** Darkness-weighted centroids over each dot and a
+   rim shared with its neighbours by distance: the centre of the dot's image
+   ellipse, which the exact estimator corrects to the projected circle centre.
 """
 
 from dataclasses import dataclass, field
-import logging
 from typing import List, Optional, Sequence, Tuple
 
 import cv2
@@ -36,9 +35,6 @@ import numpy as np
 from .camera import CameraModel
 from .errors import CodeError, ImageError
 from .pattern import Code, Ids, PatternConfig, RING_POINTS, srgb_to_linear
-
-LOG = logging.getLogger(__name__)
-
 
 @dataclass(frozen=True)
 class DetectorParams:

@@ -36,6 +36,7 @@ from .camera import CameraModel
 from .errors import CodeError, ImageError
 from .pattern import Code, Ids, PatternConfig, RING_POINTS, srgb_to_linear
 
+
 @dataclass(frozen=True)
 class DetectorParams:
     """Tuning of the detector; the defaults suit 640x480 to 1920x1080 cameras."""

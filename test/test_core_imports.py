@@ -4,7 +4,8 @@ import subprocess
 import sys
 
 CORE = ['pattern', 'camera', 'geometry', 'detector', 'pose_exact', 'pose_paper', 'locate',
-        'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli']
+        'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli',
+        'image_codec']
 
 
 def test_core_modules_do_not_import_rclpy():

@@ -10,6 +10,8 @@ STAMP := $(VENV)/.installed
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 export PYTHONDONTWRITEBYTECODE := 1
+# Room for camera images in Fast DDS's shared memory (see the file).
+export FASTRTPS_DEFAULT_PROFILES_FILE ?= $(CURDIR)/config/fastdds_large_messages.xml
 ROS_DOMAIN_ID ?= $(shell echo $$(( ($$$$ % 100) + 101 )))
 export ROS_DOMAIN_ID
 

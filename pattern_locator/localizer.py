@@ -1,0 +1,190 @@
+"""
+From one image to the robot's place in the building (ROS-free core of the locator node).
+
+For each image: find the cards, estimate the camera pose from each with
+what the robot knows (the head's angles give "up" and the camera's height,
+the last fix gives continuity), look the card up in the building map, and
+compose the base pose: ``T_frame_base = T_frame_card T_card_camera
+T_camera_base(pan, tilt)``. Several cards in view: the paper's rule (the
+biggest complete card) or a covariance-weighted fusion of all of them.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .building import BuildingMap, MappedCard
+from .camera import CameraModel
+from .errors import CodeError, ConfigError
+from .geometry import Pose, rodrigues, rotation_vector
+from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, up_in_camera
+from .locate import CardLocator
+from .pattern import Ids, PatternConfig
+from .pose_exact import PosePrior
+
+OUTPUT_FRAMES = ('room', 'building')
+FUSION_MODES = ('biggest', 'fused')
+
+
+@dataclass(frozen=True)
+class RobotFix:
+    """The robot base's pose from one image, with what it came from."""
+
+    ids: Ids                       # the card used (the biggest one when fused)
+    frame_id: str                  # room frame name, or the building frame
+    T_frame_base: Pose
+    covariance: np.ndarray         # 6x6: base position (m), rotation about the frame's axes (rad)
+    T_camera_card: Pose
+    target_pan: float              # head motion that would centre the card (rad, + = left)
+    target_tilt: float             # (rad, + = up)
+    size_px: float                 # the card's apparent size (outer ring semi-axis, px)
+    ambiguity: float
+    cards_used: int
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """Everything one image gave: the fix (if any), targets, and why cards were not used."""
+
+    fix: Optional[RobotFix]
+    cards_seen: int
+    problems: Tuple[str, ...]
+    target: Optional[Tuple[float, float, float]]   # pan, tilt, size of the biggest card seen
+
+
+class RobotLocalizer:
+    """Locate the robot base from images, a building map and the head's geometry."""
+
+    def __init__(self, pattern: PatternConfig, building: BuildingMap, head: HeadGeometry,
+                 estimator: str = 'exact', output_frame: str = 'room',
+                 fusion: str = 'biggest', min_tilt_deg: float = 0.0,
+                 max_reprojection_px: float = 1.5, camera_height_sigma: float = 0.15,
+                 up_sigma_deg: float = 5.0):
+        if output_frame not in OUTPUT_FRAMES:
+            raise ConfigError(f'output frame must be one of {", ".join(OUTPUT_FRAMES)}, '
+                              f'got {output_frame!r}')
+        if fusion not in FUSION_MODES:
+            raise ConfigError(f'fusion must be one of {", ".join(FUSION_MODES)}, got {fusion!r}')
+        self.pattern = pattern
+        self.building = building
+        self.head = head
+        self.locator = CardLocator(pattern, estimator=estimator, min_tilt_deg=min_tilt_deg)
+        self.output_frame = output_frame
+        self.fusion = fusion
+        self.max_reprojection_px = max_reprojection_px
+        self.camera_height_sigma = camera_height_sigma
+        self.up_sigma = math.radians(up_sigma_deg)
+        self.last_fix: Optional[RobotFix] = None
+
+    def process(self, image: np.ndarray, camera: CameraModel, pan: float, tilt: float
+                ) -> FrameResult:
+        """Locate the robot in one image taken with the head at ``pan``, ``tilt`` (rad)."""
+        detections = sorted(self.locator.detector.detect(image, camera),
+                            key=lambda d: -d.size_px)
+        problems: List[str] = []
+        target = None
+        candidates = []
+        T_base_camera = self.head.T_base_camera(pan, tilt)
+        for det in detections:
+            if target is None:
+                target = (*_head_motion(camera, det.centre_px), det.size_px)
+            if det.ids is None:
+                problems.append('grey image: cards have no code, so no location')
+                continue
+            try:
+                mapped = self.building.card(det.ids)
+            except CodeError as exc:
+                problems.append(str(exc))
+                continue
+            prior = self._prior(mapped, T_base_camera, pan, tilt)
+            located = self.locator.pose_of(det, camera, prior)
+            if located.T_camera_pattern is None:
+                problems.append(f'card {det.code}: {located.problem}')
+                continue
+            if located.reprojection_rms_px is not None and (
+                    located.reprojection_rms_px > self.max_reprojection_px):
+                problems.append(f'card {det.code}: reprojection error '
+                                f'{located.reprojection_rms_px:.2f} px above the limit '
+                                f'{self.max_reprojection_px:.2f} px')
+                continue
+            candidates.append((det, mapped, located))
+        if not candidates:
+            return FrameResult(None, len(detections), tuple(problems), target)
+        fixes = [self._fix(det, mapped, located, pan, tilt)
+                 for det, mapped, located in candidates]
+        if self.fusion == 'fused' and len(fixes) > 1:
+            fix = _fuse(fixes)
+        else:
+            # The paper's rule: the biggest complete card (detections are biggest first).
+            fix = fixes[0]
+        self.last_fix = fix
+        return FrameResult(fix, len(detections), tuple(problems), target)
+
+    def _prior(self, mapped: MappedCard, T_base_camera: Pose, pan: float, tilt: float
+               ) -> Optional[PosePrior]:
+        """Return what the robot knows before the image: up, camera height, last position."""
+        card_up = mapped.T_building_card.R[:, 1]
+        upright = card_up[2] > math.cos(math.radians(5.0))
+        up = up_in_camera(self.head, pan, tilt) if upright else None
+        height = None
+        if upright:
+            # Base on the room's floor: the camera's height relative to the card.
+            height = float(T_base_camera.t[2] - mapped.T_room_card.t[2])
+        previous = None
+        if self.last_fix is not None and self.last_fix.ids == mapped.ids:
+            previous = self.last_fix.T_camera_card.inverse().t
+        if up is None and height is None and previous is None:
+            return None
+        return PosePrior(up_in_camera=up, up_sigma_rad=self.up_sigma, camera_height=height,
+                         height_sigma=self.camera_height_sigma,
+                         previous_camera_in_pattern=previous)
+
+    def _fix(self, det, mapped: MappedCard, located, pan: float, tilt: float) -> RobotFix:
+        T_camera_card = located.T_camera_pattern
+        if self.output_frame == 'room':
+            T_frame_card, frame_id = mapped.T_room_card, mapped.room_frame
+        else:
+            T_frame_card, frame_id = mapped.T_building_card, self.building.frame
+        T_frame_base = base_pose_from_camera(T_frame_card, T_camera_card, self.head, pan, tilt)
+        covariance = covariance_to_base(located.covariance, T_frame_card, T_camera_card,
+                                        self.head, pan, tilt)
+        pan_to, tilt_to = _head_motion_from_pose(T_camera_card)
+        return RobotFix(det.ids, frame_id, T_frame_base, covariance, T_camera_card, pan_to,
+                        tilt_to, det.size_px, float(located.ambiguity or math.inf), 1)
+
+
+def _head_motion(camera: CameraModel, centre_px: np.ndarray) -> Tuple[float, float]:
+    """Pan and tilt (rad, REP 103 signs) that bring a pixel onto the optical axis."""
+    x, y = camera.normalize(np.asarray(centre_px, dtype=float)[None])[0]
+    return -math.atan(x), -math.atan2(y, math.hypot(x, 1.0))
+
+
+def _head_motion_from_pose(T_camera_card: Pose) -> Tuple[float, float]:
+    x, y, z = T_camera_card.t
+    return -math.atan2(x, z), -math.atan2(y, math.hypot(x, z))
+
+
+def _fuse(fixes: Sequence[RobotFix]) -> RobotFix:
+    """
+    Combine fixes from several cards, weighting each by its information.
+
+    All fixes must be in the same frame (the building frame, or one room);
+    others are left out. Rotations are averaged as small corrections to the
+    first fix's rotation.
+    """
+    base = fixes[0]
+    same = [f for f in fixes if f.frame_id == base.frame_id]
+    infos, means = [], []
+    for f in same:
+        info = np.linalg.pinv(f.covariance)
+        delta_rot = rotation_vector(f.T_frame_base.R @ base.T_frame_base.R.T)
+        infos.append(info)
+        means.append(np.concatenate([f.T_frame_base.t, delta_rot]))
+    total = np.sum(infos, axis=0)
+    covariance = np.linalg.pinv(total)
+    mean = covariance @ np.sum([i @ m for i, m in zip(infos, means)], axis=0)
+    R = rodrigues(mean[3:]) @ base.T_frame_base.R
+    return RobotFix(base.ids, base.frame_id, Pose(R, mean[:3]), covariance, base.T_camera_card,
+                    base.target_pan, base.target_tilt, base.size_px, base.ambiguity, len(same))

@@ -1,0 +1,164 @@
+"""
+The locator node as a real process over DDS.
+
+An image of the shipped building's paper room is published with its
+camera_info; the node must answer with the base pose, the ids and the
+covariance, ignore malformed input, and shut down cleanly on Ctrl-C.
+"""
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+import numpy as np
+from pattern_locator.camera import CameraModel
+from pattern_locator.image_codec import fill_msg
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from scene_tools import base_pose, CAMERA, view
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import UInt16MultiArray
+
+TILT_DEG = 15.0
+TRUTH = base_pose(4.0, 2.5, 180.0)     # 4 m in front of card 1 of floor 1 room 3
+
+
+@pytest.fixture(scope='module')
+def locator(tmp_path_factory):
+    args = [sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
+            '-p', 'use_joint_states:=false', '-p', f'fixed_tilt_deg:={TILT_DEG}']
+    log = tmp_path_factory.mktemp('locator') / 'output.txt'
+    with open(log, 'w') as out:
+        proc = subprocess.Popen(args, env=dict(os.environ), stdout=out,
+                                stderr=subprocess.STDOUT, text=True)
+    proc.log = log
+    yield proc
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope='module')
+def graph(locator):
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('locator_test_client', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    received = {'pose': [], 'ids': [], 'cov': []}
+    node.create_subscription(PoseStamped, '/robot_location',
+                             lambda m: received['pose'].append(m), 10)
+    node.create_subscription(UInt16MultiArray, '/robot_location/ids',
+                             lambda m: received['ids'].append(m), 10)
+    node.create_subscription(PoseWithCovarianceStamped, '/robot_location/with_covariance',
+                             lambda m: received['cov'].append(m), 10)
+    publishers = {'image': node.create_publisher(Image, '/camera/image_raw', 10),
+                  'info': node.create_publisher(CameraInfo, '/camera/camera_info', 10)}
+    yield node, executor, publishers, received
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def spin_until(executor, condition, timeout):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+        if condition():
+            return True
+    return False
+
+
+def info_msg(camera: CameraModel, width=None) -> CameraInfo:
+    msg = CameraInfo()
+    msg.width, msg.height = width or camera.width, camera.height
+    msg.k = [float(v) for v in camera.K.ravel()]
+    msg.d = [float(v) for v in camera.D]
+    msg.distortion_model = 'plumb_bob'
+    msg.p = [float(v) for v in np.hstack([camera.K, np.zeros((3, 1))]).ravel()]
+    return msg
+
+
+def image_msg(image, stamp_s: int) -> Image:
+    msg = Image()
+    fill_msg(msg, image, 'bgr8')
+    msg.header.stamp.sec = stamp_s
+    msg.header.frame_id = 'camera_optical_frame'
+    return msg
+
+
+def send(graph, image_message, info_message, stamp_s, timeout=8.0):
+    """Publish until a pose with this stamp comes back (best-effort input may drop)."""
+    node, executor, publishers, received = graph
+
+    def got():
+        return any(m.header.stamp.sec == stamp_s for m in received['pose'])
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        publishers['info'].publish(info_message)
+        publishers['image'].publish(image_message)
+        if spin_until(executor, got, 1.0):
+            return [m for m in received['pose'] if m.header.stamp.sec == stamp_s][0]
+    return None
+
+
+def test_node_locates_the_robot_and_survives_bad_input(locator, graph):
+    node, executor, publishers, received = graph
+    assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0
+                      and publishers['info'].get_subscription_count() > 0, 20.0), \
+        'the locator never subscribed: ' + locator.log.read_text()
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    good_info = info_msg(CAMERA)
+
+    pose = send(graph, image_msg(image, 100), good_info, 100)
+    assert pose is not None, 'no /robot_location for a good image: ' + locator.log.read_text()
+    assert pose.header.frame_id == 'floor_1/room_3'
+    p = pose.pose.position
+    assert np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]) < 0.04
+    assert spin_until(executor, lambda: received['ids'] and received['cov'], 3.0)
+    assert list(received['ids'][-1].data) == [1, 3, 1]
+    assert [d.label for d in received['ids'][-1].layout.dim] == ['floor', 'room', 'pattern']
+    cov = np.array(received['cov'][-1].pose.covariance).reshape(6, 6)
+    assert np.all(np.linalg.eigvalsh((cov + cov.T) / 2) > 0)
+
+    # Malformed input: each must give no pose, and the node must stay up.
+    short = image_msg(image, 201)
+    short.data = bytes(short.data)[:1000]
+    unknown = image_msg(image, 202)
+    unknown.encoding = 'weird16'
+    empty = Image()
+    empty.header.stamp.sec = 203
+    wrong_size = image_msg(image, 204)
+    for bad, info in ((short, good_info), (unknown, good_info), (empty, good_info),
+                      (wrong_size, info_msg(CAMERA, width=800))):
+        assert send(graph, bad, info, bad.header.stamp.sec, timeout=2.0) is None
+        assert locator.poll() is None, 'the locator died on bad input'
+    zero_k = info_msg(CAMERA)
+    zero_k.k = [0.0] * 9
+    assert send(graph, image_msg(image, 205), zero_k, 205, timeout=2.0) is None
+
+    # And a good image afterwards is still located.
+    assert send(graph, image_msg(image, 300), good_info, 300) is not None
+    stamps = {m.header.stamp.sec for m in received['pose']}
+    assert stamps <= {100, 300}, f'a pose for a stamp it should not have: {stamps}'
+
+
+def test_ctrl_c_is_a_clean_shutdown(locator, graph):
+    locator.send_signal(signal.SIGINT)
+    locator.wait(timeout=15)
+    output = locator.log.read_text()
+    assert locator.returncode == 0, output
+    assert 'Traceback' not in output, output
+    # The malformed input of the other test was reported, not ignored.
+    assert 'weird16' in output and 'camera_info is for 800x480' in output

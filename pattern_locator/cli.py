@@ -16,7 +16,7 @@ from typing import List, Optional, Sequence
 import cv2
 import numpy as np
 
-from .errors import PatternLocatorError
+from .errors import ConfigError, PatternLocatorError
 from .locate import CardLocator, ESTIMATORS, LocatedCard
 from .pattern import load_pattern_config
 
@@ -54,11 +54,16 @@ def _parser() -> argparse.ArgumentParser:
 
     make = sub.add_parser('make-pattern', help='print a card (SVG, PDF or PNG)',
                           description='Write a printable card at true millimetre scale.')
-    make.add_argument('--floor', type=int, required=True)
-    make.add_argument('--room', type=int, required=True)
-    make.add_argument('--pattern', type=int, required=True, help='card number in the room')
+    make.add_argument('--floor', type=int)
+    make.add_argument('--room', type=int)
+    make.add_argument('--pattern', type=int, help='card number in the room')
+    make.add_argument('--all', metavar='BUILDING', dest='building',
+                      help='print every card of a building map into the directory -o')
+    make.add_argument('--format', choices=('pdf', 'svg', 'png'), default='pdf',
+                      help='file format with --all (default pdf)')
     make.add_argument('-o', '--output', required=True,
-                      help='output file; the suffix (.svg, .pdf, .png) picks the format')
+                      help='output file, its suffix (.svg, .pdf, .png) picking the format; '
+                           'a directory with --all')
     make.add_argument('--paper', default='a3', choices=('a3', 'tabloid', 'a4', 'letter'),
                       help='sheet size; a4 and letter tile the card over several sheets '
                            '(default: a3)')
@@ -102,6 +107,19 @@ def _make_pattern(args: argparse.Namespace) -> int:
     from .pattern import Ids
     from .printable import write_card
     cfg = load_pattern_config(args.pattern_config)
+    if args.building:
+        from .building import load_building, write_building_cards
+        building = load_building(args.building, cfg)
+        written = write_building_cards(building, cfg, args.output, paper=args.paper,
+                                       fmt=args.format, dpi=args.dpi)
+        for path in written:
+            print(path)
+        print(f'{len(building.cards())} cards of {args.building}', file=sys.stderr)
+        return 0
+    missing = [f'--{name}' for name in ('floor', 'room', 'pattern')
+               if getattr(args, name) is None]
+    if missing:
+        raise ConfigError(f'make-pattern needs {", ".join(missing)} (or --all BUILDING)')
     code = cfg.encode(args.floor, args.room, args.pattern)
     written = write_card(args.output, cfg, Ids(args.floor, args.room, args.pattern),
                          paper=args.paper, dpi=args.dpi)

@@ -296,3 +296,31 @@ def test_console_script_in_a_process(scene):
     distance = np.linalg.norm(np.array(card['camera_in_pattern_m'])
                               - poses['one'].inverse().t)
     assert math.isfinite(distance) and distance < 0.005 * 2.0
+
+
+def test_make_pattern_all_cards_of_a_building(tmp_path, capsys):
+    building = tmp_path / 'building.yaml'
+    building.write_text(
+        'floors:\n'
+        '  - floor: 2\n'
+        '    rooms:\n'
+        '      - room: 5\n'
+        '        pose: {position: [0, 0, 6], rpy_deg: [0, 0, 0]}\n'
+        '        cards:\n'
+        '          - {pattern: 1, pose: {position: [0, 2.5, 2.15], facing_deg: 0}}\n'
+        '          - {pattern: 2, pose: {position: [10, 2.5, 2.15], facing_deg: 180}}\n')
+    status = main(['make-pattern', '--all', str(building), '-o', str(tmp_path / 'cards'),
+                   '--format', 'svg'])
+    out, err = capsys.readouterr()
+    assert status == 0, err
+    written = sorted(p.name for p in (tmp_path / 'cards').iterdir())
+    assert len(written) == 2 and written[0].startswith('floor2_room5_card1_')
+    assert out.split() == [str(tmp_path / 'cards' / name) for name in written]
+
+
+def test_make_pattern_needs_ids_or_a_building(tmp_path, capsys):
+    status = main(['make-pattern', '--room', '3', '-o', str(tmp_path / 'x.svg')])
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ''
+    assert err.strip() == ('pattern-locator: error: make-pattern needs --floor, --pattern '
+                           '(or --all BUILDING)')

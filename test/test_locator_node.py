@@ -157,7 +157,7 @@ def test_node_locates_the_robot_and_survives_bad_input(locator, graph):
 
 
 def encoded(image, encoding: str, stamp_s: int) -> Image:
-X
+    """Return the scene as a message in ``encoding`` (the codec tests' own encoders)."""
     if encoding == 'rgb8':
         pixels = image[:, :, ::-1]
     elif encoding == 'bgra8':

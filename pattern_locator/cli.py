@@ -89,6 +89,8 @@ def _parser() -> argparse.ArgumentParser:
                        help='scenes per distance bin and camera (default 40)')
     bench.add_argument('--seed', type=int, default=1)
     bench.add_argument('--quick', action='store_true', help='a small run for smoke tests')
+    bench.add_argument('--node', action='store_true',
+                       help='the locator node end to end over DDS: throughput and latency')
     bench.set_defaults(handler=_bench)
 
     demo = sub.add_parser('demo', help="the paper's 30-image route through a room",
@@ -242,6 +244,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.node:
+        from .bench_node import run_node_bench
+        return run_node_bench(frames_per_size=10 if args.quick else 40)
     from .bench import run_bench
     return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
 

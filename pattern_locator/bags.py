@@ -1,0 +1,457 @@
+"""
+Rosbag2 bags: record the simulated robot into one, play any one into the ROS graph.
+
+Bags are real rosbag2 directories (``metadata.yaml`` + an MCAP file with
+zstd-compressed chunks), written and read with the pure-Python ``rosbags``
+library, so ``ros2 bag info/play`` reads them too and no rosbag2 install is
+needed here.
+
+* :func:`record_sim` renders the paper's 30-stop route (``paper_setup.route``)
+  through floor 1 room 3 of the shipped building: per stop an image
+  (``/camera/image_raw``, bgr8), its ``/camera/camera_info``, the head's
+  angles on ``/camera/joint_states`` (one sample just before and one just
+  after the image) and the true base pose on ``/sim/true_pose``
+  (PoseStamped in the room frame), all with the image's header stamp.
+* :func:`play` publishes every message of a bag (any topics whose types are
+  importable in this ROS environment) with the recorded timing, or ``rate``
+  times faster, and waits until reliable subscribers have acknowledged all of
+  it before returning.
+
+Regenerate the checked-in test bag with
+``python -m pattern_locator.bags test/data/paper_route`` (the directory must
+not exist).
+"""
+
+import importlib
+import json
+import math
+from pathlib import Path
+import shutil
+import sys
+import time
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+from rosbags.interfaces import QosDurability, QosReliability
+from rosbags.rosbag2 import (CompressionFormat, CompressionMode, Reader, ReaderError,
+                             StoragePlugin, Writer, WriterError)
+from rosbags.typesys import get_typestore, Stores
+
+from .building import load_building
+from .camera import CameraModel
+from .errors import ConfigError, PatternLocatorError
+from .geometry import Pose, quaternion_xyzw, rodrigues
+from .head import HeadGeometry
+from .image_codec import encode_image
+from .paper_setup import route
+from .pattern import load_pattern_config
+from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+
+IMAGE_TOPIC = '/camera/image_raw'
+INFO_TOPIC = '/camera/camera_info'
+JOINTS_TOPIC = '/camera/joint_states'
+TRUTH_TOPIC = '/sim/true_pose'
+SIM_TOPICS = {
+    IMAGE_TOPIC: 'sensor_msgs/msg/Image',
+    INFO_TOPIC: 'sensor_msgs/msg/CameraInfo',
+    JOINTS_TOPIC: 'sensor_msgs/msg/JointState',
+    TRUTH_TOPIC: 'geometry_msgs/msg/PoseStamped',
+}
+SIM_FLOOR, SIM_ROOM = 1, 3
+OPTICAL_FRAME = 'camera_optical_frame'
+PAN_JOINT, TILT_JOINT = 'camera_pan', 'camera_tilt'
+# First image stamp: a fixed date (2023-11-14) plus an offset, so stamps are not round.
+START_NS = 1_700_000_000 * 10 ** 9 + 37_123_457
+# Joint-state samples this long before and after each image (the head is still at a stop).
+JOINT_SAMPLE_OFFSET_NS = 50_000_000
+# Recording latency (bag time - header stamp) of each topic; camera_info before the image.
+_LATENCY_NS = {JOINTS_TOPIC: 1_000_000, TRUTH_TOPIC: 1_000_000, INFO_TOPIC: 2_000_000,
+               IMAGE_TOPIC: 4_000_000}
+# The robot faces the card it looks at, give or take this much (seeded), so that
+# the head pans.
+HEADING_SPREAD_DEG = 25.0
+# Checked-in test bag (test/data/paper_route): 5 Hz keeps the replay test short.
+TEST_BAG_OPTIONS = {'rate_hz': 5.0, 'jpeg': True}
+
+PLAYER_DEPTH = 100
+_TYPESTORE = None
+
+
+def _typestore():
+    global _TYPESTORE
+    if _TYPESTORE is None:
+        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+    return _TYPESTORE
+
+
+# Recording ---------------------------------------------------------------------------
+
+
+def default_sim_camera() -> CameraModel:
+    """Return the recorded camera: 640x480, 60 degrees horizontal field of view."""
+    return CameraModel.from_fov(640, 480, 60.0, name='sim_camera')
+
+
+def sim_stops(n_stops: int = 30, seed: int = 7, head: Optional[HeadGeometry] = None
+              ) -> List[Tuple[Pose, int, float, float]]:
+    """
+    Return the route's stops as (T_room_base, card number, pan, tilt).
+
+    The base stands on the floor under the route's camera position, facing
+    the card the route looks at give or take ``HEADING_SPREAD_DEG``; the head
+    aims at the card centre, clamped to its travel limits.
+    """
+    head = head or HeadGeometry()
+    stops = route()
+    if not 1 <= n_stops <= len(stops):
+        raise ConfigError(f'record-sim: the route has {len(stops)} stops, asked for {n_stops}')
+    building = load_building()
+    rng = np.random.default_rng(seed)
+    out = []
+    for position, number in stops[:n_stops]:
+        card = building.card((SIM_FLOOR, SIM_ROOM, number)).T_room_card.t
+        yaw = math.atan2(card[1] - position[1], card[0] - position[0])
+        yaw += math.radians(rng.uniform(-HEADING_SPREAD_DEG, HEADING_SPREAD_DEG))
+        T_room_base = Pose(rodrigues(np.array([0.0, 0.0, yaw])),
+                           np.array([position[0], position[1], 0.0]))
+        pan, tilt = head.clamp(*head.aim_angles(T_room_base.inverse().apply(card[None])[0]))
+        out.append((T_room_base, number, pan, tilt))
+    return out
+
+
+def render_stop(T_room_base: Pose, pan: float, tilt: float, camera: CameraModel,
+                seed: int, jpeg: bool = False, noise_sigma: float = 0.0) -> np.ndarray:
+    """
+    Return the BGR image the head camera sees in the simulated room.
+
+    A painted wall with a soft light gradient and a warm cast; ``jpeg``: the
+    image went through JPEG at quality 90 (an MJPEG camera).
+    """
+    pattern = load_pattern_config()
+    room = load_building(None, pattern).room(SIM_FLOOR, SIM_ROOM)
+    T_camera_room = (T_room_base @ HeadGeometry().T_base_camera(pan, tilt)).inverse()
+    cards = []
+    for card in room.cards:
+        T_camera_card = T_camera_room @ card.T_room_card
+        if T_camera_card.t[2] > 0.3:
+            cards.append(CardPlacement(T_camera_card, DotCardTexture(pattern, card.code),
+                                       code=card.code, config=pattern))
+    options = RenderOptions(background='white', gain=0.85, gradient=0.15,
+                            gradient_angle_deg=30.0, colour_cast=(1.0, 0.97, 0.92),
+                            defocus_sigma_px=0.5, noise_sigma=noise_sigma,
+                            jpeg_quality=90 if jpeg else None, seed=seed)
+    return render_scene(camera, cards, options).image
+
+
+def record_sim(out_dir: Union[str, Path], n_stops: int = 30, seed: int = 7,
+               camera: Optional[CameraModel] = None, rate_hz: float = 2.0,
+               jpeg: bool = False, noise_sigma: float = 0.0) -> Path:
+    """
+    Render the paper's route into a new rosbag2 bag directory; return its path.
+
+    Stop ``i`` is stamped ``START_NS + i / rate_hz``. ``noise_sigma`` (8-bit
+    units) adds sensor noise, which compresses badly: about 0.4 MB per
+    640x480 frame at 1.0 against 15 kB without.
+    """
+    out_dir = Path(out_dir)
+    camera = camera or default_sim_camera()
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        raise ConfigError(f'record-sim: rate must be a positive number of Hz, got {rate_hz!r}')
+    if out_dir.exists():
+        raise ConfigError(f'{out_dir}: exists already, not overwriting')
+    head = HeadGeometry()
+    stops = sim_stops(n_stops, seed, head)
+    frame = load_building().room(SIM_FLOOR, SIM_ROOM).frame
+    ts = _typestore()
+    writer = Writer(out_dir, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
+    # STORAGE: zstd-compressed MCAP chunks, which rosbag2's own MCAP plugin reads.
+    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+    writer.set_custom_data('pattern_locator.record_sim', json.dumps({
+        'floor': SIM_FLOOR, 'room': SIM_ROOM, 'seed': seed, 'rate_hz': rate_hz,
+        'jpeg': jpeg, 'noise_sigma': noise_sigma,
+        'cards': [number for _, number, _, _ in stops]}))
+    try:
+        writer.open()
+    except (OSError, WriterError) as exc:
+        raise ConfigError(f'{out_dir}: cannot write the bag ({exc})') from None
+    try:
+        connections = {topic: writer.add_connection(topic, msgtype, typestore=ts)
+                       for topic, msgtype in SIM_TOPICS.items()}
+
+        def write(topic, stamp_ns, msg):
+            data = ts.serialize_cdr(msg, SIM_TOPICS[topic])
+            writer.write(connections[topic], stamp_ns + _LATENCY_NS[topic], data)
+
+        info = _camera_info(ts, camera)
+        for i, (T_room_base, _, pan, tilt) in enumerate(stops):
+            stamp_ns = START_NS + round(i * 1e9 / rate_hz)
+            image = render_stop(T_room_base, pan, tilt, camera, seed * 1000 + i, jpeg,
+                                noise_sigma)
+            joints_before = _joint_state(ts, stamp_ns - JOINT_SAMPLE_OFFSET_NS, pan, tilt)
+            write(JOINTS_TOPIC, stamp_ns - JOINT_SAMPLE_OFFSET_NS, joints_before)
+            write(TRUTH_TOPIC, stamp_ns, _pose_stamped(ts, stamp_ns, frame, T_room_base))
+            info.header = _header(ts, stamp_ns, OPTICAL_FRAME)
+            write(INFO_TOPIC, stamp_ns, info)
+            write(IMAGE_TOPIC, stamp_ns, _image(ts, stamp_ns, image))
+            joints_after = _joint_state(ts, stamp_ns + JOINT_SAMPLE_OFFSET_NS, pan, tilt)
+            write(JOINTS_TOPIC, stamp_ns + JOINT_SAMPLE_OFFSET_NS, joints_after)
+    except BaseException:
+        # A half-written bag is no use: remove it (the directory did not exist before).
+        writer.abort()
+        shutil.rmtree(out_dir, ignore_errors=True)
+        raise
+    writer.close()
+    return out_dir
+
+
+def _header(ts, stamp_ns: int, frame_id: str):
+    Time = ts.types['builtin_interfaces/msg/Time']
+    Header = ts.types['std_msgs/msg/Header']
+    return Header(stamp=Time(sec=stamp_ns // 10 ** 9, nanosec=stamp_ns % 10 ** 9),
+                  frame_id=frame_id)
+
+
+def _camera_info(ts, camera: CameraModel):
+    RegionOfInterest = ts.types['sensor_msgs/msg/RegionOfInterest']
+    K = np.asarray(camera.K, dtype=float)
+    return ts.types['sensor_msgs/msg/CameraInfo'](
+        header=_header(ts, 0, OPTICAL_FRAME), height=camera.height, width=camera.width,
+        distortion_model='plumb_bob', d=np.asarray(camera.D, dtype=float).ravel(),
+        k=K.ravel(), r=np.eye(3).ravel(), p=np.hstack([K, np.zeros((3, 1))]).ravel(),
+        binning_x=0, binning_y=0,
+        roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+
+
+def _image(ts, stamp_ns: int, image: np.ndarray):
+    height, width, encoding, is_bigendian, step, data = encode_image(image, 'bgr8')
+    return ts.types['sensor_msgs/msg/Image'](
+        header=_header(ts, stamp_ns, OPTICAL_FRAME), height=height, width=width,
+        encoding=encoding, is_bigendian=is_bigendian, step=step,
+        data=np.frombuffer(data, dtype=np.uint8))
+
+
+def _joint_state(ts, stamp_ns: int, pan: float, tilt: float):
+    return ts.types['sensor_msgs/msg/JointState'](
+        header=_header(ts, stamp_ns, ''), name=[PAN_JOINT, TILT_JOINT],
+        position=np.array([pan, tilt], dtype=float), velocity=np.zeros(0),
+        effort=np.zeros(0))
+
+
+def _pose_stamped(ts, stamp_ns: int, frame: str, T: Pose):
+    Point = ts.types['geometry_msgs/msg/Point']
+    Quaternion = ts.types['geometry_msgs/msg/Quaternion']
+    Pose_ = ts.types['geometry_msgs/msg/Pose']
+    x, y, z, w = (float(v) for v in quaternion_xyzw(T.R))
+    return ts.types['geometry_msgs/msg/PoseStamped'](
+        header=_header(ts, stamp_ns, frame),
+        pose=Pose_(position=Point(x=float(T.t[0]), y=float(T.t[1]), z=float(T.t[2])),
+                   orientation=Quaternion(x=x, y=y, z=z, w=w)))
+
+
+# Reading -----------------------------------------------------------------------------
+
+
+def open_bag(bag: Union[str, Path]) -> Reader:
+    """Return an open rosbags Reader; ConfigError when it is not a readable rosbag2 bag."""
+    path = Path(bag)
+    if not path.exists():
+        raise ConfigError(f'{path}: no such bag')
+    if path.is_dir() and not (path / 'metadata.yaml').is_file():
+        raise ConfigError(f'{path}: not a rosbag2 bag (no metadata.yaml in the directory)')
+    try:
+        reader = Reader(path)
+        reader.open()
+    except (ReaderError, OSError, KeyError, ValueError) as exc:
+        raise ConfigError(f'{path}: not a readable rosbag2 bag ({exc})') from None
+    return reader
+
+
+def message_class(type_name: str):
+    """Return the ROS message class of ``pkg/msg/Name``; ConfigError if it is not installed."""
+    parts = type_name.split('/')
+    if len(parts) != 3 or parts[1] != 'msg' or not all(parts):
+        raise ConfigError(f'message type {type_name!r} is not a ROS 2 message type '
+                          '(expected package/msg/Name)')
+    try:
+        module = importlib.import_module(f'{parts[0]}.msg')
+        cls = getattr(module, parts[2])
+    except (ImportError, AttributeError):
+        raise ConfigError(f'unknown message type {type_name}: not installed in this ROS '
+                          'environment') from None
+    return cls
+
+
+def _check_definition(topic: str, type_name: str, digest: str) -> None:
+    """Refuse a recording whose message definition differs from the installed one."""
+    ts = _typestore()
+    if not digest.startswith('RIHS01_') or type_name not in ts.types:
+        return
+    if ts.hash_rihs01(type_name) != digest:
+        raise ConfigError(f'{topic}: the bag recorded {type_name} with a different definition '
+                          'than ROS 2 Jazzy (another distribution?); cannot play it')
+
+
+def _qos(connections):
+    """Return the player's QoS for a topic: reliable unless every recorder saw best effort."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    profiles = [q for c in connections
+                for q in (getattr(c.ext, 'offered_qos_profiles', None) or ())]
+    qos = QoSProfile(depth=PLAYER_DEPTH)
+    qos.reliability = ReliabilityPolicy.RELIABLE
+    qos.durability = DurabilityPolicy.VOLATILE
+    if profiles and all(q.reliability == QosReliability.BEST_EFFORT for q in profiles):
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    if profiles and all(q.durability == QosDurability.TRANSIENT_LOCAL for q in profiles):
+        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    return qos
+
+
+def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
+         topics: Optional[Sequence[str]] = None, wait_acked_s: float = 10.0,
+         wait_for_subscribers: Sequence[str] = (), discovery_timeout_s: float = 10.0,
+         remap: Optional[Mapping[str, str]] = None) -> int:
+    """
+    Publish a bag's messages with the recorded timing; return how many were published.
+
+    ``rate``: playback speed (2.0 = twice as fast). ``topics``: play only
+    these (default: all). ``remap``: bag topic -> published topic.
+    ``wait_for_subscribers``: published topics that must have a subscriber
+    before playing starts (ConfigError after ``discovery_timeout_s``). Before
+    returning, waits up to ``wait_acked_s`` for every reliable subscriber to
+    acknowledge everything. Messages are published as recorded (serialized,
+    headers untouched); no /clock. Runs its own node in ``context`` (a new
+    one, shut down at the end, when None).
+    """
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.serialization import deserialize_message
+
+    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0.0):
+        raise ConfigError(f'bag play: rate must be a positive number, got {rate!r}')
+    remap = dict(remap or {})
+    reader = open_bag(bag_dir)
+    try:
+        by_topic: Dict[str, list] = {}
+        for connection in reader.connections:
+            by_topic.setdefault(connection.topic, []).append(connection)
+        wanted = list(by_topic) if topics is None else list(topics)
+        missing = [t for t in wanted if t not in by_topic]
+        if missing:
+            raise ConfigError(f'{bag_dir}: no topic {", ".join(missing)} in the bag (it has '
+                              f'{", ".join(sorted(by_topic)) or "none"})')
+        classes = {}
+        for topic in wanted:
+            types = {c.msgtype for c in by_topic[topic]}
+            if len(types) != 1:
+                raise ConfigError(f'{topic}: recorded with several types ({sorted(types)})')
+            type_name = types.pop()
+            classes[topic] = message_class(type_name)
+            for c in by_topic[topic]:
+                _check_definition(topic, type_name, c.digest or '')
+        out_topics = {topic: remap.get(topic, topic) for topic in wanted}
+        unknown = [t for t in wait_for_subscribers if t not in out_topics.values()]
+        if unknown:
+            raise ConfigError(f'bag play: cannot wait for subscribers of {", ".join(unknown)}: '
+                              'not a topic being played')
+
+        own_context = context is None
+        if own_context:
+            context = rclpy.context.Context()
+            rclpy.init(args=[], context=context)
+        node = None
+        published = 0
+        try:
+            node = rclpy.create_node('pattern_locator_bag_player', context=context)
+            publishers = {topic: node.create_publisher(classes[topic], out_topics[topic],
+                                                       _qos(by_topic[topic]))
+                          for topic in wanted}
+            by_out = {out_topics[t]: p for t, p in publishers.items()}
+            deadline = time.monotonic() + discovery_timeout_s
+            for name in wait_for_subscribers:
+                while by_out[name].get_subscription_count() == 0:
+                    if time.monotonic() > deadline:
+                        raise ConfigError(f'bag play: no subscriber on {name} after '
+                                          f'{discovery_timeout_s:g} s')
+                    time.sleep(0.02)
+            checked = set()
+            connections = [c for topic in wanted for c in by_topic[topic]]
+            start_wall = first_ns = None
+            for connection, stamp_ns, raw in reader.messages(connections=connections):
+                topic = connection.topic
+                if topic not in checked:
+                    try:
+                        deserialize_message(bytes(raw), classes[topic])
+                    except Exception as exc:  # noqa: B902 - any failure means a bad record
+                        raise ConfigError(f'{topic}: the recorded {connection.msgtype} does '
+                                          f'not deserialize ({exc})') from None
+                    checked.add(topic)
+                if start_wall is None:
+                    start_wall, first_ns = time.monotonic(), stamp_ns
+                due = start_wall + (stamp_ns - first_ns) * 1e-9 / rate
+                delay = due - time.monotonic()
+                if delay > 0.0:
+                    time.sleep(delay)
+                publishers[topic].publish(bytes(raw))
+                published += 1
+            unacked = [out_topics[t] for t, p in publishers.items()
+                       if not p.wait_for_all_acked(Duration(seconds=wait_acked_s))]
+            if unacked:
+                node.get_logger().warning(
+                    f'not every message was acknowledged within {wait_acked_s:g} s on: '
+                    + ', '.join(unacked))
+        finally:
+            if node is not None:
+                node.destroy_node()
+            if own_context:
+                rclpy.try_shutdown(context=context)
+    finally:
+        reader.close()
+    return published
+
+
+def bag_summary(bag: Union[str, Path]) -> Dict[str, Tuple[str, int]]:
+    """Return {topic: (type, message count)} of a bag."""
+    reader = open_bag(bag)
+    try:
+        return {topic: (info.msgtype or '(several)', info.msgcount)
+                for topic, info in sorted(reader.topics.items())}
+    finally:
+        reader.close()
+
+
+# Command-line entry points ---------------------------------------------------------------
+
+
+def _size(path: Path) -> int:
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob('*') if p.is_file())
+
+
+def record_sim_main(out: Union[str, Path], **opts) -> int:
+    """Record the simulated route into ``out`` and print what was written; return 0."""
+    path = record_sim(out, **opts)
+    topics = bag_summary(path)
+    print(f'{path}: {_size(path) / 1e6:.2f} MB, '
+          + ', '.join(f'{t} {n} x {ty}' for t, (ty, n) in topics.items()))
+    return 0
+
+
+def play_main(bag: Union[str, Path], rate: float = 1.0, **opts) -> int:
+    """Play a bag into the ROS graph and print how many messages went out; return 0."""
+    started = time.monotonic()
+    count = play(bag, rate=rate, **opts)
+    print(f'{bag}: published {count} messages in {time.monotonic() - started:.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    if len(sys.argv) != 2:
+        print('usage: python -m pattern_locator.bags OUT_DIR  (writes the test bag)',
+              file=sys.stderr)
+        sys.exit(2)
+    try:
+        sys.exit(record_sim_main(sys.argv[1], **TEST_BAG_OPTIONS))
+    except PatternLocatorError as exc:
+        print(f'error: {exc}', file=sys.stderr)
+        sys.exit(2)

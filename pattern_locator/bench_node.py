@@ -1,0 +1,183 @@
+"""
+``pattern-locator bench --node``: the locator node end to end over DDS.
+
+A real ``locator`` process receives rendered images of the shipped building
+(with their camera_info) from this process, which measures, per resolution:
+the sustained throughput (poses per second while images arrive at a fixed
+rate), the latency from publishing an image to receiving its
+``/robot_location`` (median, p95), and, in the same run and on the same
+images, the core's own time per frame (``RobotLocalizer.process`` in this
+process): the difference is the node's overhead (conversion, DDS, threads).
+"""
+
+import math
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Dict, List
+
+import cv2
+import numpy as np
+
+from .building import load_building
+from .camera import CameraModel
+from .geometry import Pose, rodrigues
+from .head import HeadGeometry
+from .image_codec import fill_msg
+from .localizer import RobotLocalizer
+from .pattern import load_pattern_config
+from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from .resources import config_path
+
+TILT_DEG = 15.0
+
+
+def _frames(camera: CameraModel, n: int) -> List[np.ndarray]:
+    """Render ``n`` views of floor 1 room 3 from spots 3-6 m in front of card 1."""
+    pattern = load_pattern_config()
+    building = load_building(None, pattern)
+    head = HeadGeometry()
+    rng = np.random.default_rng(3)
+    frames = []
+    for i in range(n):
+        x, y = rng.uniform(3.0, 6.0), rng.uniform(2.0, 3.0)
+        base = Pose(rodrigues(np.array([0.0, 0.0, math.pi + rng.uniform(-0.1, 0.1)])),
+                    np.array([x, y, 0.0]))
+        T_room_camera = base @ head.T_base_camera(0.0, math.radians(TILT_DEG))
+        cards = []
+        for card in building.room(1, 3).cards:
+            T = T_room_camera.inverse() @ card.T_room_card
+            if T.t[2] > 0.3:
+                cards.append(CardPlacement(T, DotCardTexture(pattern, card.code),
+                                           code=card.code, config=pattern))
+        frames.append(render_scene(camera, cards, RenderOptions(noise_sigma=1.5,
+                                                                seed=i)).image)
+    return frames
+
+
+def _core_ms(camera: CameraModel, frames: List[np.ndarray]) -> float:
+    pattern = load_pattern_config()
+    localizer = RobotLocalizer(pattern, load_building(None, pattern), HeadGeometry())
+    times = []
+    for image in frames:
+        start = time.perf_counter()
+        localizer.process(image, camera, 0.0, math.radians(TILT_DEG))
+        times.append((time.perf_counter() - start) * 1000.0)
+    return float(np.median(times))
+
+
+def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> Dict:
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import CameraInfo, Image
+
+    # Both sides need room for images in shared memory (a writer puts the
+    # sample in its own segment), and discovery stays on this machine.
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(config_path(
+        'fastdds_large_messages.xml')))
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env = dict(os.environ)
+    log = tempfile.NamedTemporaryFile('w', suffix='.log', delete=False)
+    proc = subprocess.Popen([sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
+                             '-p', 'use_joint_states:=false',
+                             '-p', f'fixed_tilt_deg:={TILT_DEG}'],
+                            env=env, stdout=log, stderr=subprocess.STDOUT)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('locator_bench', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    arrivals: Dict[int, float] = {}
+    node.create_subscription(PoseStamped, '/robot_location',
+                             lambda m: arrivals.setdefault(m.header.stamp.nanosec,
+                                                           time.perf_counter()), 50)
+    diagnostics = []
+    node.create_subscription(DiagnosticArray, '/diagnostics',
+                             lambda m: diagnostics.append(m), 10)
+    pub_image = node.create_publisher(Image, '/camera/image_raw', 10)
+    pub_info = node.create_publisher(CameraInfo, '/camera/camera_info', 10)
+    info = CameraInfo()
+    info.width, info.height = camera.width, camera.height
+    info.k = [float(v) for v in camera.K.ravel()]
+    info.d = [float(v) for v in camera.D]
+    info.distortion_model = 'plumb_bob'
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and (pub_image.get_subscription_count() == 0
+                                               or node.count_publishers('/robot_location') == 0):
+            executor.spin_once(timeout_sec=0.05)
+        messages = []
+        for i, image in enumerate(frames):
+            msg = Image()
+            fill_msg(msg, image, 'bgr8')
+            msg.header.stamp.sec = 1000
+            msg.header.stamp.nanosec = i + 1
+            messages.append(msg)
+        # Warm up (first frames pay for imports and caches), then measure.
+        for msg in messages[:3]:
+            pub_info.publish(info)
+            pub_image.publish(msg)
+            end = time.monotonic() + 2.0
+            while time.monotonic() < end and msg.header.stamp.nanosec not in arrivals:
+                executor.spin_once(timeout_sec=0.01)
+        sent: Dict[int, float] = {}
+        period = 1.0 / rate_hz
+        start = time.perf_counter()
+        for i, msg in enumerate(messages[3:]):
+            due = start + i * period
+            while time.perf_counter() < due:
+                executor.spin_once(timeout_sec=max(0.0, min(0.002, due - time.perf_counter())))
+            pub_info.publish(info)
+            sent[msg.header.stamp.nanosec] = time.perf_counter()
+            pub_image.publish(msg)
+        end = time.perf_counter() + 2.5
+        while time.perf_counter() < end:
+            executor.spin_once(timeout_sec=0.01)
+        counts = {kv.key: kv.value for kv in diagnostics[-1].status[0].values} if diagnostics \
+            else {}
+        duration = (len(messages) - 3) * period
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
+        Path(log.name).unlink(missing_ok=True)
+    latencies = [(arrivals[k] - t) * 1000.0 for k, t in sent.items() if k in arrivals]
+    return {
+        'sent': len(sent), 'located': len(latencies), 'node': counts,
+        'fps': len(latencies) / duration if duration else math.nan,
+        'median_ms': float(np.median(latencies)) if latencies else math.nan,
+        'p95_ms': float(np.percentile(latencies, 95)) if latencies else math.nan,
+    }
+
+
+def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
+    """Print throughput and latency of the node next to the core's time per frame."""
+    cv2.setNumThreads(1)
+    print(f'locator node over DDS: {frames_per_size} images per resolution published at '
+          f'{rate_hz:g} Hz to a locator process on this machine')
+    print(f'{"resolution":<12}{"core ms":>9}{"latency med":>13}{"p95":>8}{"overhead":>10}'
+          f'{"located":>9}{"fps":>7}')
+    for camera in (CameraModel.from_fov(640, 480, 60.0), CameraModel.from_fov(1280, 720, 60.0)):
+        frames = _frames(camera, frames_per_size + 3)
+        core = _core_ms(camera, frames)
+        result = _run_node_bench(camera, frames, rate_hz)
+        print(f'{f"{camera.width}x{camera.height}":<12}{core:>9.2f}{result["median_ms"]:>13.2f}'
+              f'{result["p95_ms"]:>8.2f}{result["median_ms"] - core:>10.2f}'
+              f'{f"{result["located"]}/{result["sent"]}":>9}{result["fps"]:>7.1f}')
+    print('latency: image published -> /robot_location received; overhead: median latency '
+          'minus the core time per frame measured in the same run; fps: poses per second '
+          'while images arrive at the rate above (the node drops frames it cannot keep up with)')
+    return 0

@@ -93,6 +93,20 @@ def _parser() -> argparse.ArgumentParser:
                        help='the locator node end to end over DDS: throughput and latency')
     bench.set_defaults(handler=_bench)
 
+    bag = sub.add_parser('bag', help='record a simulated route, or play a bag into ROS',
+                         description='rosbag2 bags (MCAP) without ros2cli.')
+    bag_sub = bag.add_subparsers(title='bag commands')
+    record = bag_sub.add_parser('record-sim', help="render the paper's route into a bag")
+    record.add_argument('out', help='bag directory to create')
+    record.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
+    record.add_argument('--rate', type=float, default=2.0, help='images per second')
+    record.add_argument('--seed', type=int, default=7)
+    record.set_defaults(handler=_bag_record)
+    play = bag_sub.add_parser('play', help='publish a bag with its recorded timing')
+    play.add_argument('bag', help='bag directory (or .mcap / .db3 file)')
+    play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    play.set_defaults(handler=_bag_play)
+
     demo = sub.add_parser('demo', help="the paper's 30-image route through a room",
                           description="Locate the camera along the paper's route and print "
                                       'the errors in the form of its Table 1.')
@@ -249,6 +263,16 @@ def _bench(args: argparse.Namespace) -> int:
         return run_node_bench(frames_per_size=10 if args.quick else 40)
     from .bench import run_bench
     return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
+
+
+def _bag_record(args: argparse.Namespace) -> int:
+    from .bags import record_sim_main
+    return record_sim_main(args.out, n_stops=args.stops, rate_hz=args.rate, seed=args.seed)
+
+
+def _bag_play(args: argparse.Namespace) -> int:
+    from .bags import play_main
+    return play_main(args.bag, rate=args.rate)
 
 
 def _demo(args: argparse.Namespace) -> int:

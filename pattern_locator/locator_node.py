@@ -184,7 +184,12 @@ class LocatorNode(Node):
         except PatternLocatorError as exc:
             self._problem(f'joint states: {exc}')
             return
-        self.joints.add(_stamp_seconds(msg.header.stamp), pan, tilt)
+        stamp = _stamp_seconds(msg.header.stamp)
+        latest = self.joints.latest()
+        if latest is not None and stamp < latest[0] - 1.0:
+            # Time went backwards (a bag replayed again, a simulator reset).
+            self.joints.clear()
+        self.joints.add(stamp, pan, tilt)
 
     # Work (its own thread) ------------------------------------------------------------
 

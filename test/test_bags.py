@@ -19,7 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 from pattern_locator.bags import (IMAGE_TOPIC, JOINT_SAMPLE_OFFSET_NS, play, record_sim,
-                                  SIM_TOPICS, sim_stops, START_NS, TRUTH_TOPIC)
+                                  sim_stops, SIM_TOPICS, START_NS, TRUTH_TOPIC)
 from pattern_locator.errors import ConfigError
 from pattern_locator.geometry import rotation_from_quaternion
 from pattern_locator.paper_setup import route
@@ -91,8 +91,8 @@ def test_record_sim_writes_a_readable_bag(tmp_path):
         before, after = joints[2 * k], joints[2 * k + 1]
         assert stamp_ns(before) == stamps[k] - JOINT_SAMPLE_OFFSET_NS
         assert stamp_ns(after) == stamps[k] + JOINT_SAMPLE_OFFSET_NS
-        assert np.allclose(before.position, [pan, tilt]) and np.allclose(after.position,
-                                                                        [pan, tilt])
+        assert np.allclose(before.position, [pan, tilt])
+        assert np.allclose(after.position, [pan, tilt])
         p = bag['/sim/true_pose'][k][1].pose.position
         assert np.allclose([p.x, p.y, p.z], T_room_base.t)
     # Bag times never run backwards within a topic and follow the header stamps.
@@ -262,7 +262,7 @@ class Listener:
         ]
 
     def counts(self):
-        """Return the locator's latest diagnostics counts (None before the first)."""
+        """Return the latest diagnostics counts of the locator (None before the first)."""
         for array in reversed(self.diags):
             for status in array.status:
                 if status.name == 'pattern_locator: locator':

@@ -27,7 +27,7 @@ from .building import load_building
 from .camera import CameraModel
 from .geometry import Pose, rodrigues
 from .head import HeadGeometry
-from .image_codec import fill_msg
+from .image_codec import fill_camera_info, fill_msg
 from .localizer import RobotLocalizer
 from .pattern import load_pattern_config
 from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
@@ -104,10 +104,7 @@ def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: floa
     pub_image = node.create_publisher(Image, '/camera/image_raw', 10)
     pub_info = node.create_publisher(CameraInfo, '/camera/camera_info', 10)
     info = CameraInfo()
-    info.width, info.height = camera.width, camera.height
-    info.k = [float(v) for v in camera.K.ravel()]
-    info.d = [float(v) for v in camera.D]
-    info.distortion_model = 'plumb_bob'
+    fill_camera_info(info, camera)
     try:
         deadline = time.monotonic() + 30.0
         while time.monotonic() < deadline and (pub_image.get_subscription_count() == 0

@@ -19,6 +19,7 @@ from typing import Any, Dict, Tuple
 import cv2
 import numpy as np
 
+from .camera import CameraModel
 from .errors import ImageError
 
 # Bytes per pixel of each encoding the decoder reads (the bytes in one row of
@@ -227,3 +228,25 @@ def fill_msg(msg: Any, image: np.ndarray, encoding: str = 'bgr8') -> None:
     msg.is_bigendian = is_bigendian
     msg.step = step
     msg.data = data
+
+
+def camera_from_info(msg) -> CameraModel:
+    """Build a CameraModel from a sensor_msgs/CameraInfo; CameraError if it is unusable."""
+    K = np.asarray(msg.k, dtype=float).reshape(3, 3)
+    model = msg.distortion_model or 'plumb_bob'
+    D = np.asarray(msg.d, dtype=float)
+    if not D.size:
+        model, D = 'none', np.zeros(5)
+    return CameraModel(int(msg.width), int(msg.height), K, D, model,
+                       msg.header.frame_id or 'camera')
+
+
+def fill_camera_info(msg, camera: CameraModel) -> None:
+    """Fill a sensor_msgs/CameraInfo's size, K, D, R and P from a CameraModel."""
+    msg.width, msg.height = int(camera.width), int(camera.height)
+    msg.distortion_model = 'plumb_bob' if camera.distortion_model == 'none' else \
+        camera.distortion_model
+    msg.k = [float(v) for v in camera.K.ravel()]
+    msg.d = [float(v) for v in camera.D]
+    msg.r = [float(v) for v in np.eye(3).ravel()]
+    msg.p = [float(v) for v in np.hstack([camera.K, np.zeros((3, 1))]).ravel()]

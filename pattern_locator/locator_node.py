@@ -44,22 +44,11 @@ from .camera import CameraModel
 from .errors import PatternLocatorError
 from .geometry import quaternion_xyzw
 from .head import angles_from_joint_state, HeadGeometry, JointStateBuffer
-from .image_codec import fill_msg, image_from_msg
+from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .localizer import FrameResult, RobotLocalizer
 from .pattern import load_pattern_config
 
 THROTTLE_S = 5.0
-
-
-def camera_from_info(msg: CameraInfo) -> CameraModel:
-    """Build a CameraModel from a CameraInfo message; CameraError if it is unusable."""
-    K = np.asarray(msg.k, dtype=float).reshape(3, 3)
-    model = msg.distortion_model or 'plumb_bob'
-    D = np.asarray(msg.d, dtype=float)
-    if not D.size:
-        model, D = 'none', np.zeros(5)
-    return CameraModel(int(msg.width), int(msg.height), K, D, model,
-                       msg.header.frame_id or 'camera')
 
 
 def _stamp_seconds(stamp) -> float:

@@ -8,11 +8,7 @@ it publishes with ``/sim/true_pose`` at the same stamp.
 
 import json
 import math
-import os
 from pathlib import Path
-import signal
-import subprocess
-import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -29,6 +25,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
+from ros_tools import locator_process, spin_until
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -188,15 +185,6 @@ def client():
     rclpy.shutdown(context=context)
 
 
-def spin_until(executor, condition, timeout):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        if condition():
-            return True
-    return False
-
-
 def test_play_any_topics_from_a_sqlite3_bag(tmp_path, client):
     """A bag as another robot might have recorded it: other topics, sqlite3 storage."""
     node, executor = client
@@ -226,21 +214,8 @@ def test_play_any_topics_from_a_sqlite3_bag(tmp_path, client):
 
 @pytest.fixture
 def locator(tmp_path):
-    args = [sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
-            '-p', 'use_joint_states:=true']
-    log = tmp_path / 'locator.txt'
-    with open(log, 'w') as out:
-        proc = subprocess.Popen(args, env=dict(os.environ), stdout=out,
-                                stderr=subprocess.STDOUT, text=True)
-    proc.log = log
-    yield proc
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    with locator_process(tmp_path / 'locator.txt', ['use_joint_states:=true']) as proc:
+        yield proc
 
 
 class Listener:

@@ -7,20 +7,18 @@ covariance, ignore malformed input, and shut down cleanly on Ctrl-C.
 """
 
 import math
-import os
 import signal
-import subprocess
-import sys
 import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 from pattern_locator.camera import CameraModel
-from pattern_locator.image_codec import fill_msg
+from pattern_locator.image_codec import fill_camera_info, fill_msg
 import pytest
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from ros_tools import locator_process, spin_until
 from scene_tools import base_pose, CAMERA, view
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import UInt16MultiArray
@@ -32,21 +30,9 @@ TRUTH = base_pose(4.0, 2.5, 180.0)     # 4 m in front of card 1 of floor 1 room 
 
 @pytest.fixture(scope='module')
 def locator(tmp_path_factory):
-    args = [sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
-            '-p', 'use_joint_states:=false', '-p', f'fixed_tilt_deg:={TILT_DEG}']
     log = tmp_path_factory.mktemp('locator') / 'output.txt'
-    with open(log, 'w') as out:
-        proc = subprocess.Popen(args, env=dict(os.environ), stdout=out,
-                                stderr=subprocess.STDOUT, text=True)
-    proc.log = log
-    yield proc
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    with locator_process(log, ['use_joint_states:=false', f'fixed_tilt_deg:={TILT_DEG}']) as proc:
+        yield proc
 
 
 @pytest.fixture(scope='module')
@@ -71,22 +57,11 @@ def graph(locator):
     rclpy.shutdown(context=context)
 
 
-def spin_until(executor, condition, timeout):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-        if condition():
-            return True
-    return False
-
-
 def info_msg(camera: CameraModel, width=None) -> CameraInfo:
     msg = CameraInfo()
-    msg.width, msg.height = width or camera.width, camera.height
-    msg.k = [float(v) for v in camera.K.ravel()]
-    msg.d = [float(v) for v in camera.D]
-    msg.distortion_model = 'plumb_bob'
-    msg.p = [float(v) for v in np.hstack([camera.K, np.zeros((3, 1))]).ravel()]
+    fill_camera_info(msg, camera)
+    if width is not None:
+        msg.width = width
     return msg
 
 

@@ -176,8 +176,9 @@ def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
               f'{result["median_ms"]:>13.2f}'
               f'{result["p95_ms"]:>8.2f}{result["median_ms"] - core:>10.2f}'
               f'{f"{result["located"]}/{result["sent"]}":>9}{result["fps"]:>7.1f}')
-    print('node ms: median time from an image\'s arrival in the node to its pose published '
-          '(the node\'s diagnostics); latency: image published -> /robot_location received; '
+    print('node ms: median time from the arrival of an image in the node to its pose '
+          'published (from the node diagnostics); latency: image published -> /robot_location '
+          'received; '
           'overhead: median latency minus the core time per frame measured in the same run; '
           'fps: poses per second '
           'while images arrive at the rate above (the node drops frames it cannot keep up with)')

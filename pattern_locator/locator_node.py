@@ -32,7 +32,7 @@ import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -63,6 +63,9 @@ class LocatorNode(Node):
         super().__init__('locator', **kwargs)
         self._declare_parameters()
         p = self._params()
+        # One frame's work is small: OpenCV's own threads only contend with
+        # the node's and the camera pipeline's.
+        cv2.setNumThreads(int(p['opencv_threads']))
         pattern = load_pattern_config(p['pattern_config'] or None)
         building = load_building(p['building_map'] or None, pattern)
         self.head = HeadGeometry(
@@ -138,6 +141,9 @@ class LocatorNode(Node):
                -90.0, 90.0)
         number('joint_state_max_age_s', 0.5, 'joint states older than this are stale',
                0.0, 10.0)
+        self.declare_parameter('opencv_threads', 1, ParameterDescriptor(
+            description='threads OpenCV may use per frame (0: its default)',
+            integer_range=[IntegerRange(from_value=0, to_value=64, step=1)]))
         for name, value, what in (
                 ('head.base_to_pan_xyz', [0.0, 0.0, 1.0], 'base_link to the pan joint (m)'),
                 ('head.pan_to_tilt_xyz', [0.0, 0.0, 0.05], 'pan joint to the tilt joint (m)'),
@@ -149,7 +155,7 @@ class LocatorNode(Node):
         return {name: self.get_parameter(name).value for name in (
             'pattern_config', 'building_map', 'estimator', 'output_frame', 'fusion',
             'base_frame', 'min_tilt_deg', 'max_reprojection_px', 'use_joint_states',
-            'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s',
+            'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s', 'opencv_threads',
             'head.base_to_pan_xyz', 'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz')}
 
     # Callbacks (executor thread: store only) ---------------------------------------

@@ -17,6 +17,7 @@ import numpy as np
 
 from .building import BuildingMap, MappedCard
 from .camera import CameraModel
+from .detector import CardDetection
 from .errors import CodeError, ConfigError
 from .geometry import Pose, rodrigues, rotation_vector
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, up_in_camera
@@ -52,6 +53,7 @@ class FrameResult:
     cards_seen: int
     problems: Tuple[str, ...]
     target: Optional[Tuple[float, float, float]]   # pan, tilt, size of the biggest card seen
+    detections: Tuple[CardDetection, ...] = ()
 
 
 class RobotLocalizer:
@@ -111,7 +113,8 @@ class RobotLocalizer:
                 continue
             candidates.append((det, mapped, located))
         if not candidates:
-            return FrameResult(None, len(detections), tuple(problems), target)
+            return FrameResult(None, len(detections), tuple(problems), target,
+                               tuple(detections))
         fixes = [self._fix(det, mapped, located, pan, tilt)
                  for det, mapped, located in candidates]
         if self.fusion == 'fused' and len(fixes) > 1:
@@ -120,7 +123,7 @@ class RobotLocalizer:
             # The paper's rule: the biggest complete card (detections are biggest first).
             fix = fixes[0]
         self.last_fix = fix
-        return FrameResult(fix, len(detections), tuple(problems), target)
+        return FrameResult(fix, len(detections), tuple(problems), target, tuple(detections))
 
     def _prior(self, mapped: MappedCard, T_base_camera: Pose, pan: float, tilt: float
                ) -> Optional[PosePrior]:

@@ -47,6 +47,7 @@ from .geometry import quaternion_xyzw
 from .head import angles_from_joint_state, HeadGeometry, JointStateBuffer
 from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .localizer import FrameResult, RobotLocalizer
+from .overlay import draw_overlay
 from .pattern import load_pattern_config
 
 THROTTLE_S = 5.0
@@ -286,18 +287,15 @@ class LocatorNode(Node):
         self.pub_pose.publish(pose)
 
     def _publish_debug(self, msg: Image, result: FrameResult, image: np.ndarray) -> None:
-        canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
-        text = 'no card'
+        location = None
         if result.fix is not None:
             f = result.fix
             x, y, z = f.T_frame_base.t
-            text = (f'floor {f.ids.floor} room {f.ids.room} card {f.ids.pattern}  '
-                    f'base {x:.2f} {y:.2f} {z:.2f} m in {f.frame_id}')
-        cv2.putText(canvas, text, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 255), 2,
-                    cv2.LINE_AA)
+            location = (f'floor {f.ids.floor} room {f.ids.room} card {f.ids.pattern}  '
+                        f'base {x:.2f} {y:.2f} {z:.2f} m in {f.frame_id}')
         out = Image()
         out.header = msg.header
-        fill_msg(out, canvas, 'bgr8')
+        fill_msg(out, draw_overlay(image, result.detections, location), 'bgr8')
         self.pub_debug.publish(out)
 
     def _publish_diagnostics(self) -> None:

@@ -5,7 +5,7 @@ import sys
 
 CORE = ['pattern', 'camera', 'geometry', 'detector', 'pose_exact', 'pose_paper', 'locate',
         'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli',
-        'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags']
+        'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags', 'overlay']
 
 
 def test_core_modules_do_not_import_rclpy():

@@ -168,6 +168,20 @@ def test_every_encoding_gives_the_same_place(locator, graph):
     assert locator.poll() is None
 
 
+def test_debug_image_while_someone_looks(locator, graph):
+    node, executor, publishers, received = graph
+    debug = []
+    node.create_subscription(Image, '/pattern_locator/debug_image', debug.append, 5)
+    assert spin_until(executor, lambda: node.count_publishers('/pattern_locator/debug_image')
+                      > 0, 10.0)
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    assert send(graph, image_msg(image, 500), info_msg(CAMERA), 500) is not None
+    assert spin_until(executor, lambda: any(m.header.stamp.sec == 500 for m in debug), 5.0)
+    shown = [m for m in debug if m.header.stamp.sec == 500][0]
+    assert (shown.width, shown.height, shown.encoding) == (640, 480, 'bgr8')
+    assert bytes(shown.data) != image.tobytes()       # something was drawn on it
+
+
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):
     locator.send_signal(signal.SIGINT)
     locator.wait(timeout=15)

@@ -80,6 +80,8 @@ class LocatorNode(Node):
         self.fixed_angles = (math.radians(p['fixed_pan_deg']), math.radians(p['fixed_tilt_deg']))
         self.use_joint_states = p['use_joint_states']
         self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'])
+        self.joint_wait_s = p['joint_state_wait_s']
+        self._joint_arrived = threading.Condition()
         self.get_logger().info('locator configuration: ' + ', '.join(
             f'{k}={v}' for k, v in sorted(p.items())))
 
@@ -142,6 +144,8 @@ class LocatorNode(Node):
                -90.0, 90.0)
         number('joint_state_max_age_s', 0.5, 'joint states older than this are stale',
                0.0, 10.0)
+        number('joint_state_wait_s', 0.05, 'wait this long for a joint state newer than '
+               'the image before using the newest one', 0.0, 1.0)
         self.declare_parameter('opencv_threads', 1, ParameterDescriptor(
             description='threads OpenCV may use per frame (0: its default)',
             integer_range=[IntegerRange(from_value=0, to_value=64, step=1)]))
@@ -156,7 +160,8 @@ class LocatorNode(Node):
         return {name: self.get_parameter(name).value for name in (
             'pattern_config', 'building_map', 'estimator', 'output_frame', 'fusion',
             'base_frame', 'min_tilt_deg', 'max_reprojection_px', 'use_joint_states',
-            'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s', 'opencv_threads',
+            'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s', 'joint_state_wait_s',
+            'opencv_threads',
             'head.base_to_pan_xyz', 'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz')}
 
     # Callbacks (executor thread: store only) ---------------------------------------
@@ -190,6 +195,8 @@ class LocatorNode(Node):
             # Time went backwards (a bag replayed again, a simulator reset).
             self.joints.clear()
         self.joints.add(stamp, pan, tilt)
+        with self._joint_arrived:
+            self._joint_arrived.notify_all()
 
     # Work (its own thread) ------------------------------------------------------------
 
@@ -233,7 +240,18 @@ class LocatorNode(Node):
     def _head_angles(self, msg: Image) -> Tuple[float, float]:
         if not self.use_joint_states:
             return self.fixed_angles
-        return self.joints.at(_stamp_seconds(msg.header.stamp))
+        stamp = _stamp_seconds(msg.header.stamp)
+        # An image can overtake the joint state taken just after it: wait a
+        # little for a sample on its far side rather than hold an old one.
+        deadline = time.monotonic() + self.joint_wait_s
+        with self._joint_arrived:
+            while True:
+                latest = self.joints.latest()
+                remaining = deadline - time.monotonic()
+                if (latest is not None and latest[0] >= stamp) or remaining <= 0:
+                    break
+                self._joint_arrived.wait(remaining)
+        return self.joints.at(stamp)
 
     def _problem(self, text: str) -> None:
         """Count and report a problem; each distinct message at most every few seconds."""

@@ -13,9 +13,6 @@ process): the difference is the node's overhead (conversion, DDS, threads).
 import math
 import os
 from pathlib import Path
-import signal
-import subprocess
-import sys
 import tempfile
 import time
 from typing import Dict, List
@@ -29,6 +26,7 @@ from .geometry import Pose, rodrigues
 from .head import HeadGeometry
 from .image_codec import fill_camera_info, fill_msg
 from .localizer import RobotLocalizer
+from .node_process import locator_process
 from .pattern import load_pattern_config
 from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
 from .resources import config_path
@@ -73,6 +71,18 @@ def _core_ms(camera: CameraModel, frames: List[np.ndarray]) -> float:
 
 
 def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> Dict:
+    # Both sides need room for images in shared memory (a writer puts the
+    # sample in its own segment), and discovery stays on this machine.
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(config_path(
+        'fastdds_large_messages.xml')))
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    with tempfile.TemporaryDirectory() as tmp, locator_process(
+            Path(tmp) / 'locator.log',
+            ['use_joint_states:=false', f'fixed_tilt_deg:={TILT_DEG}']):
+        return _measure(camera, frames, rate_hz)
+
+
+def _measure(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> Dict:
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -80,17 +90,6 @@ def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: floa
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import CameraInfo, Image
 
-    # Both sides need room for images in shared memory (a writer puts the
-    # sample in its own segment), and discovery stays on this machine.
-    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(config_path(
-        'fastdds_large_messages.xml')))
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env = dict(os.environ)
-    log = tempfile.NamedTemporaryFile('w', suffix='.log', delete=False)
-    proc = subprocess.Popen([sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
-                             '-p', 'use_joint_states:=false',
-                             '-p', f'fixed_tilt_deg:={TILT_DEG}'],
-                            env=env, stdout=log, stderr=subprocess.STDOUT)
     context = Context()
     rclpy.init(context=context)
     node = rclpy.create_node('locator_bench', context=context)
@@ -148,13 +147,6 @@ def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: floa
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
-        Path(log.name).unlink(missing_ok=True)
     latencies = [(arrivals[k] - t) * 1000.0 for k, t in sent.items() if k in arrivals]
     return {
         'sent': len(sent), 'located': len(latencies), 'node': counts,

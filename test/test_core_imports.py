@@ -5,7 +5,8 @@ import sys
 
 CORE = ['pattern', 'camera', 'geometry', 'detector', 'pose_exact', 'pose_paper', 'locate',
         'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli',
-        'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags', 'overlay']
+        'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags', 'overlay',
+        'node_process']
 
 
 def test_core_modules_do_not_import_rclpy():

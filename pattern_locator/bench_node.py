@@ -20,6 +20,7 @@ from typing import Dict, List
 import cv2
 import numpy as np
 
+from .bags import render_stop
 from .building import load_building
 from .camera import CameraModel
 from .geometry import Pose, rodrigues
@@ -28,32 +29,21 @@ from .image_codec import fill_camera_info, fill_msg
 from .localizer import RobotLocalizer
 from .node_process import locator_process
 from .pattern import load_pattern_config
-from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
 from .resources import config_path
 
 TILT_DEG = 15.0
 
 
 def _frames(camera: CameraModel, n: int) -> List[np.ndarray]:
-    """Render ``n`` views of floor 1 room 3 from spots 3-6 m in front of card 1."""
-    pattern = load_pattern_config()
-    building = load_building(None, pattern)
-    head = HeadGeometry()
+    """Render ``n`` views of the paper's room from spots 3-6 m in front of its card 1."""
     rng = np.random.default_rng(3)
     frames = []
     for i in range(n):
         x, y = rng.uniform(3.0, 6.0), rng.uniform(2.0, 3.0)
         base = Pose(rodrigues(np.array([0.0, 0.0, math.pi + rng.uniform(-0.1, 0.1)])),
                     np.array([x, y, 0.0]))
-        T_room_camera = base @ head.T_base_camera(0.0, math.radians(TILT_DEG))
-        cards = []
-        for card in building.room(1, 3).cards:
-            T = T_room_camera.inverse() @ card.T_room_card
-            if T.t[2] > 0.3:
-                cards.append(CardPlacement(T, DotCardTexture(pattern, card.code),
-                                           code=card.code, config=pattern))
-        frames.append(render_scene(camera, cards, RenderOptions(noise_sigma=1.5,
-                                                                seed=i)).image)
+        frames.append(render_stop(base, 0.0, math.radians(TILT_DEG), camera, seed=i,
+                                  noise_sigma=1.5))
     return frames
 
 

@@ -65,8 +65,7 @@ def wall_card_rotation(facing_deg: float) -> np.ndarray:
     Return the rotation of an upright card on a wall, its +z at heading ``facing_deg``.
 
     The heading is measured in the room's floor plane from room +x towards +y.
-    Card +y is room +z (up) and card x = y cross z (right, along the wall), as
-    ``paper_setup._card_on_wall``.
+    Card +y is room +z (up) and card x = y cross z (right, along the wall).
     """
     a = math.radians(facing_deg)
     z_axis = np.array([math.cos(a), math.sin(a), 0.0])

@@ -107,6 +107,12 @@ class CameraModel:
         n = self.normalize(pixels)
         return n * [self.fx, self.fy] + [self.cx, self.cy]
 
+    def distort_pixels(self, ideal_px: np.ndarray) -> np.ndarray:
+        """Return this camera's pixels of ideal-camera pixels (N, 2): undistort's inverse."""
+        n = (np.asarray(ideal_px, dtype=float).reshape(-1, 2) - [self.cx, self.cy]) / [
+            self.fx, self.fy]
+        return self.project(np.column_stack([n, np.ones(len(n))]))
+
     def scaled(self, factor: float) -> 'CameraModel':
         """Return this camera at ``factor`` times the resolution (binning/decimation)."""
         K = self.K.copy()

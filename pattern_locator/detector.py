@@ -436,7 +436,7 @@ class Detector:
                           for r, k in missing])
         pred = _apply_h(H, model)
         if frame.camera is not None and frame.camera.has_distortion:
-            pred = _distort_pixels(frame.camera, pred)
+            pred = frame.camera.distort_pixels(pred)
         tol = np.maximum(0.75, self.params.max_homography_error * _h_scale(H, model)
                          * self.config.ring_dot_radius)
         for (ring, k), p, t in zip(missing, pred, tol):
@@ -464,7 +464,7 @@ class Detector:
         pred = _apply_h(H, model)
         radius = _h_scale(H, model) * cfg.ring_dot_radius
         if frame.camera is not None and frame.camera.has_distortion:
-            pred = _distort_pixels(frame.camera, pred)
+            pred = frame.camera.distort_pixels(pred)
         wanted = {k for ring, k in np.argwhere(slot_blob < 0)}
         out = {}
         h, w = frame.darkest.shape
@@ -611,7 +611,7 @@ class Detector:
         """Median colour of the card's paper at points between the dots."""
         pts = _apply_h(H, self._white_xy)
         if frame.camera is not None and frame.camera.has_distortion:
-            pts = _distort_pixels(frame.camera, pts)
+            pts = frame.camera.distort_pixels(pts)
         h, w = frame.image.shape[:2]
         inside = (pts[:, 0] >= 1) & (pts[:, 0] < w - 1) & (pts[:, 1] >= 1) & (pts[:, 1] < h - 1)
         pts = pts[inside]
@@ -808,8 +808,3 @@ def _rotation_about_z(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     # Clockwise by `angle` in a frame with y up: (x, y) -> (x c + y s, -x s + y c).
     return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _distort_pixels(camera: CameraModel, undistorted_px: np.ndarray) -> np.ndarray:
-    n = (undistorted_px - [camera.cx, camera.cy]) / [camera.fx, camera.fy]
-    return camera.project(np.column_stack([n, np.ones(len(n))]))

@@ -15,6 +15,7 @@ from typing import List, Tuple
 
 import numpy as np
 
+from .building import wall_card_rotation
 from .camera import CameraModel
 from .geometry import look_at, Pose, rodrigues
 
@@ -46,12 +47,7 @@ def _card_on_wall(number: int, x: float, y: float, facing_deg: float) -> WallCar
     Room frame: x along the long wall, y across, z up, origin at a floor corner.
     Card frame: x right along the wall, y up, z into the room.
     """
-    a = math.radians(facing_deg)
-    z_axis = np.array([math.cos(a), math.sin(a), 0.0])
-    y_axis = np.array([0.0, 0.0, 1.0])
-    x_axis = np.cross(y_axis, z_axis)
-    R = np.column_stack([x_axis, y_axis, z_axis])
-    return WallCard(number, Pose(R, np.array([x, y, CARD_HEIGHT])))
+    return WallCard(number, Pose(wall_card_rotation(facing_deg), np.array([x, y, CARD_HEIGHT])))
 
 
 def room_cards() -> List[WallCard]:

@@ -1,0 +1,503 @@
+"""
+VISCA protocol codec for the Sony EVI-D30/D31: packets as bytes, no I/O.
+
+Everything here follows ``design/visca.md``: commands ``8x ... FF`` from the
+controller, replies ``z0 ... FF`` from the camera (z = 8 + address), 16-bit
+values as four nibbles in two's complement. Both sides use it: the camera
+driver builds commands and parses replies, the emulated camera parses
+commands and builds replies. Angles here are in the camera's own sign
+convention (positive pan = right, positive tilt = up) and in degrees; the
+conversion to ROS radians (REP 103, positive pan = left) is the camera
+layer's job.
+"""
+
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+from .errors import PatternLocatorError
+
+
+class ViscaError(PatternLocatorError):
+    """A VISCA packet that is malformed, or a value out of the protocol's range."""
+
+
+TERMINATOR = 0xFF
+BROADCAST = 0x88
+MAX_PACKET = 16
+
+# Travel and units of the EVI-D30/D31 (visca.md, "Travel and angles").
+PAN_UNITS_PER_DEG = 8.8
+TILT_UNITS_PER_DEG = 12.0
+PAN_LIMIT_UNITS = 880
+TILT_LIMIT_UNITS = 300
+# Speed steps (visca.md, "Commands used by a tracking loop").
+PAN_SPEED_MAX = 0x18
+TILT_SPEED_MAX = 0x14
+PAN_MAX_DEG_S = 80.0
+TILT_MAX_DEG_S = 50.0
+ZOOM_WIDE = 0x0000
+ZOOM_TELE = 0x03FF
+ZOOM_SPEED_MIN = 2
+ZOOM_SPEED_MAX = 7
+
+# Pan-tilt drive directions.
+PAN_LEFT, PAN_RIGHT, PAN_STOP = 0x01, 0x02, 0x03
+TILT_UP, TILT_DOWN, TILT_STOP = 0x01, 0x02, 0x03
+
+# Error codes (third byte of ``z0 6y ee FF``).
+ERROR_MESSAGE_LENGTH = 0x01
+ERROR_SYNTAX = 0x02
+ERROR_BUFFER_FULL = 0x03
+ERROR_CANCELLED = 0x04
+ERROR_NO_SOCKET = 0x05
+ERROR_NOT_EXECUTABLE = 0x41
+ERROR_NAMES = {
+    ERROR_MESSAGE_LENGTH: 'message length error',
+    ERROR_SYNTAX: 'syntax error',
+    ERROR_BUFFER_FULL: 'command buffer full',
+    ERROR_CANCELLED: 'command cancelled',
+    ERROR_NO_SOCKET: 'no socket',
+    ERROR_NOT_EXECUTABLE: 'command not executable',
+}
+
+POWER_ON, POWER_STANDBY = 0x02, 0x03
+
+
+def hex_bytes(data: bytes) -> str:
+    """Return bytes the way visca.md writes them: ``81 01 06 04 FF``."""
+    return ' '.join(f'{b:02X}' for b in data)
+
+
+# Values --------------------------------------------------------------------------------
+
+
+def encode_nibbles(value: int, count: int = 4, signed: bool = True) -> bytes:
+    """
+    Return ``value`` as ``count`` bytes of one nibble each, most significant first.
+
+    Signed values are two's complement on ``4 * count`` bits.
+    """
+    bits = 4 * count
+    low, high = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+    if not low <= int(value) <= high:
+        raise ViscaError(f'value {value} does not fit {count} nibbles '
+                         f'({"signed" if signed else "unsigned"})')
+    word = int(value) & ((1 << bits) - 1)
+    return bytes((word >> (4 * (count - 1 - i))) & 0x0F for i in range(count))
+
+
+def decode_nibbles(data: bytes, signed: bool = True) -> int:
+    """Return the value of bytes holding one nibble each (inverse of encode_nibbles)."""
+    word = 0
+    for byte in data:
+        if byte > 0x0F:
+            raise ViscaError(f'nibble byte {byte:02X} has its high nibble set in '
+                             f'{hex_bytes(data)}')
+        word = (word << 4) | byte
+    bits = 4 * len(data)
+    if signed and word >= 1 << (bits - 1):
+        word -= 1 << bits
+    return word
+
+
+def pan_units(degrees: float) -> int:
+    """Return the pan position in camera units for an angle (positive = right)."""
+    return int(round(degrees * PAN_UNITS_PER_DEG))
+
+
+def tilt_units(degrees: float) -> int:
+    """Return the tilt position in camera units for an angle (positive = up)."""
+    return int(round(degrees * TILT_UNITS_PER_DEG))
+
+
+def pan_degrees(units: int) -> float:
+    """Return the pan angle in degrees (positive = right) for camera units."""
+    return units / PAN_UNITS_PER_DEG
+
+
+def tilt_degrees(units: int) -> float:
+    """Return the tilt angle in degrees (positive = up) for camera units."""
+    return units / TILT_UNITS_PER_DEG
+
+
+def pan_speed_deg_s(step: int) -> float:
+    """Return the pan speed of a speed step (1..18h); linear up to 80 deg/s."""
+    return PAN_MAX_DEG_S * step / PAN_SPEED_MAX
+
+
+def tilt_speed_deg_s(step: int) -> float:
+    """Return the tilt speed of a speed step (1..14h); linear up to 50 deg/s."""
+    return TILT_MAX_DEG_S * step / TILT_SPEED_MAX
+
+
+def _address(address: int) -> int:
+    if not 1 <= address <= 7:
+        raise ViscaError(f'camera address {address} is not in 1..7')
+    return 0x80 | address
+
+
+def _speeds(pan_speed: int, tilt_speed: int) -> bytes:
+    # Always 01..max: some models answer a 00 speed with a syntax error.
+    if not 1 <= pan_speed <= PAN_SPEED_MAX:
+        raise ViscaError(f'pan speed {pan_speed} is not in 1..{PAN_SPEED_MAX}')
+    if not 1 <= tilt_speed <= TILT_SPEED_MAX:
+        raise ViscaError(f'tilt speed {tilt_speed} is not in 1..{TILT_SPEED_MAX}')
+    return bytes((pan_speed, tilt_speed))
+
+
+def _position(pan: int, tilt: int, relative: bool) -> bytes:
+    if not relative:
+        if not -PAN_LIMIT_UNITS <= pan <= PAN_LIMIT_UNITS:
+            raise ViscaError(f'pan position {pan} is outside +-{PAN_LIMIT_UNITS} units')
+        if not -TILT_LIMIT_UNITS <= tilt <= TILT_LIMIT_UNITS:
+            raise ViscaError(f'tilt position {tilt} is outside +-{TILT_LIMIT_UNITS} units')
+    return encode_nibbles(pan) + encode_nibbles(tilt)
+
+
+# Commands (controller -> camera) --------------------------------------------------------
+
+
+def address_set() -> bytes:
+    """Return the Address Set broadcast (the first camera takes address 1)."""
+    return bytes((BROADCAST, 0x30, 0x01, TERMINATOR))
+
+
+def if_clear() -> bytes:
+    """Return the IF_Clear broadcast (empties both sockets of every camera)."""
+    return bytes((BROADCAST, 0x01, 0x00, 0x01, TERMINATOR))
+
+
+def cancel(address: int, socket: int) -> bytes:
+    """Return Cancel for the command held in ``socket`` (1 or 2)."""
+    if socket not in (1, 2):
+        raise ViscaError(f'socket {socket} is not 1 or 2')
+    return bytes((_address(address), 0x20 | socket, TERMINATOR))
+
+
+def pan_tilt_drive(address: int, pan_speed: int, tilt_speed: int,
+                   pan_direction: int, tilt_direction: int) -> bytes:
+    """Return Pan-tilt Drive: directions PAN_LEFT/RIGHT/STOP and TILT_UP/DOWN/STOP."""
+    if pan_direction not in (PAN_LEFT, PAN_RIGHT, PAN_STOP):
+        raise ViscaError(f'pan direction {pan_direction} is not 1, 2 or 3')
+    if tilt_direction not in (TILT_UP, TILT_DOWN, TILT_STOP):
+        raise ViscaError(f'tilt direction {tilt_direction} is not 1, 2 or 3')
+    return (bytes((_address(address), 0x01, 0x06, 0x01)) + _speeds(pan_speed, tilt_speed)
+            + bytes((pan_direction, tilt_direction, TERMINATOR)))
+
+
+def pan_tilt_stop(address: int, pan_speed: int = 1, tilt_speed: int = 1) -> bytes:
+    """Return the Pan-tilt Drive that stops both axes (speeds stay non-zero)."""
+    return pan_tilt_drive(address, pan_speed, tilt_speed, PAN_STOP, TILT_STOP)
+
+
+def pan_tilt_absolute(address: int, pan_speed: int, tilt_speed: int,
+                      pan: int, tilt: int) -> bytes:
+    """Return AbsolutePosition to (pan, tilt) in camera units."""
+    return (bytes((_address(address), 0x01, 0x06, 0x02)) + _speeds(pan_speed, tilt_speed)
+            + _position(pan, tilt, False) + bytes((TERMINATOR,)))
+
+
+def pan_tilt_relative(address: int, pan_speed: int, tilt_speed: int,
+                      pan: int, tilt: int) -> bytes:
+    """Return RelativePosition by (pan, tilt) camera units."""
+    return (bytes((_address(address), 0x01, 0x06, 0x03)) + _speeds(pan_speed, tilt_speed)
+            + _position(pan, tilt, True) + bytes((TERMINATOR,)))
+
+
+def pan_tilt_home(address: int) -> bytes:
+    """Return Home (pan and tilt to 0)."""
+    return bytes((_address(address), 0x01, 0x06, 0x04, TERMINATOR))
+
+
+def pan_tilt_reset(address: int) -> bytes:
+    """Return Reset (the head re-initialises through both ends of travel)."""
+    return bytes((_address(address), 0x01, 0x06, 0x05, TERMINATOR))
+
+
+def pan_tilt_limit_set(address: int, up_right: bool, pan: int, tilt: int) -> bytes:
+    """Return LimitSet of the up-right (True) or down-left (False) corner."""
+    return (bytes((_address(address), 0x01, 0x06, 0x07, 0x00, 0x01 if up_right else 0x00))
+            + _position(pan, tilt, False) + bytes((TERMINATOR,)))
+
+
+def pan_tilt_limit_clear(address: int, up_right: bool) -> bytes:
+    """Return LimitClear of the up-right (True) or down-left (False) corner."""
+    return bytes((_address(address), 0x01, 0x06, 0x07, 0x01, 0x01 if up_right else 0x00,
+                  0x07, 0x0F, 0x0F, 0x0F, 0x07, 0x0F, 0x0F, 0x0F, TERMINATOR))
+
+
+def zoom_stop(address: int) -> bytes:
+    """Return Zoom Stop."""
+    return bytes((_address(address), 0x01, 0x04, 0x07, 0x00, TERMINATOR))
+
+
+def zoom_tele(address: int, speed: Optional[int] = None) -> bytes:
+    """Return Zoom Tele, at the standard speed or a variable speed 2..7."""
+    return bytes((_address(address), 0x01, 0x04, 0x07, _zoom_byte(0x02, 0x20, speed),
+                  TERMINATOR))
+
+
+def zoom_wide(address: int, speed: Optional[int] = None) -> bytes:
+    """Return Zoom Wide, at the standard speed or a variable speed 2..7."""
+    return bytes((_address(address), 0x01, 0x04, 0x07, _zoom_byte(0x03, 0x30, speed),
+                  TERMINATOR))
+
+
+def _zoom_byte(standard: int, variable: int, speed: Optional[int]) -> int:
+    if speed is None:
+        return standard
+    if not ZOOM_SPEED_MIN <= speed <= ZOOM_SPEED_MAX:
+        raise ViscaError(f'zoom speed {speed} is not in {ZOOM_SPEED_MIN}..{ZOOM_SPEED_MAX}')
+    return variable | speed
+
+
+def zoom_direct(address: int, position: int) -> bytes:
+    """Return Zoom Direct to ``position`` (0 wide .. 3FFh tele)."""
+    if not ZOOM_WIDE <= position <= ZOOM_TELE:
+        raise ViscaError(f'zoom position {position} is not in 0..{ZOOM_TELE}')
+    return (bytes((_address(address), 0x01, 0x04, 0x47))
+            + encode_nibbles(position, signed=False) + bytes((TERMINATOR,)))
+
+
+def focus_auto(address: int) -> bytes:
+    """Return Focus Auto."""
+    return bytes((_address(address), 0x01, 0x04, 0x38, 0x02, TERMINATOR))
+
+
+def focus_manual(address: int) -> bytes:
+    """Return Focus Manual."""
+    return bytes((_address(address), 0x01, 0x04, 0x38, 0x03, TERMINATOR))
+
+
+def power(address: int, on: bool) -> bytes:
+    """Return Power On or Power Off (standby)."""
+    return bytes((_address(address), 0x01, 0x04, 0x00, POWER_ON if on else POWER_STANDBY,
+                  TERMINATOR))
+
+
+# Inquiries (controller -> camera; answered on socket 0 without an ACK).
+def inquiry_pan_tilt_position(address: int) -> bytes:
+    """Return the pan-tilt position inquiry."""
+    return bytes((_address(address), 0x09, 0x06, 0x12, TERMINATOR))
+
+
+def inquiry_zoom_position(address: int) -> bytes:
+    """Return the zoom position inquiry."""
+    return bytes((_address(address), 0x09, 0x04, 0x47, TERMINATOR))
+
+
+def inquiry_power(address: int) -> bytes:
+    """Return the power inquiry."""
+    return bytes((_address(address), 0x09, 0x04, 0x00, TERMINATOR))
+
+
+def inquiry_pan_tilt_max_speed(address: int) -> bytes:
+    """Return the pan-tilt maximum speed inquiry."""
+    return bytes((_address(address), 0x09, 0x06, 0x11, TERMINATOR))
+
+
+def inquiry_pan_tilt_mode(address: int) -> bytes:
+    """Return the pan-tilt mode (status) inquiry."""
+    return bytes((_address(address), 0x09, 0x06, 0x10, TERMINATOR))
+
+
+def inquiry_version(address: int) -> bytes:
+    """Return the version inquiry."""
+    return bytes((_address(address), 0x09, 0x00, 0x02, TERMINATOR))
+
+
+def is_inquiry(packet: bytes) -> bool:
+    """Return True for an inquiry packet (``8x 09 ...``)."""
+    return len(packet) >= 3 and packet[1] == 0x09
+
+
+# Replies (camera -> controller) ----------------------------------------------------------
+
+
+def reply_header(address: int) -> int:
+    """Return the first byte of the camera's replies: ``z0``, z = 8 + address."""
+    if not 1 <= address <= 7:
+        raise ViscaError(f'camera address {address} is not in 1..7')
+    return (8 + address) << 4
+
+
+def ack(address: int, socket: int) -> bytes:
+    """Return ACK: the command is held in ``socket``."""
+    return bytes((reply_header(address), 0x40 | socket, TERMINATOR))
+
+
+def completion(address: int, socket: int) -> bytes:
+    """Return Completion of the command in ``socket``."""
+    return bytes((reply_header(address), 0x50 | socket, TERMINATOR))
+
+
+def answer(address: int, payload: bytes) -> bytes:
+    """Return an inquiry answer ``z0 50 <payload> FF``."""
+    return bytes((reply_header(address), 0x50)) + bytes(payload) + bytes((TERMINATOR,))
+
+
+def error(address: int, socket: int, code: int) -> bytes:
+    """Return an error reply ``z0 6y ee FF``."""
+    return bytes((reply_header(address), 0x60 | socket, code, TERMINATOR))
+
+
+def network_change(address: int) -> bytes:
+    """Return Network Change ``z0 38 FF``."""
+    return bytes((reply_header(address), 0x38, TERMINATOR))
+
+
+def address_set_reply(next_address: int) -> bytes:
+    """Return the Address Set broadcast as it comes back round the chain."""
+    return bytes((BROADCAST, 0x30, next_address, TERMINATOR))
+
+
+def pan_tilt_position_payload(pan: int, tilt: int) -> bytes:
+    """Return the payload of the pan-tilt position answer."""
+    return encode_nibbles(pan) + encode_nibbles(tilt)
+
+
+def zoom_position_payload(position: int) -> bytes:
+    """Return the payload of the zoom position answer."""
+    return encode_nibbles(position, signed=False)
+
+
+@dataclass(frozen=True)
+class Reply:
+    """
+    One parsed reply from the camera.
+
+    ``kind`` is 'ack', 'completion', 'answer', 'error', 'network_change',
+    'address_set' or 'if_clear'. ``socket`` is 0 for answers and broadcasts;
+    ``payload`` holds an answer's bytes between ``50`` and ``FF``; ``code``
+    an error's code; ``raw`` the whole packet.
+    """
+
+    kind: str
+    address: int
+    socket: int
+    raw: bytes
+    payload: bytes = b''
+    code: int = 0
+
+    @property
+    def error_name(self) -> str:
+        """Return the error's name from visca.md (empty for non-errors)."""
+        if self.kind != 'error':
+            return ''
+        return ERROR_NAMES.get(self.code, f'unknown error {self.code:02X}')
+
+    def describe(self) -> str:
+        """Return a one-line description with the reply bytes."""
+        what = self.error_name if self.kind == 'error' else self.kind
+        return f'{what} on socket {self.socket} ({hex_bytes(self.raw)})'
+
+
+def parse_reply(packet: bytes) -> Reply:
+    """Return the reply a complete packet (header .. FF) holds; ViscaError if malformed."""
+    packet = bytes(packet)
+    if len(packet) < 3 or packet[-1] != TERMINATOR:
+        raise ViscaError(f'reply too short or not terminated by FF: {hex_bytes(packet)}')
+    if len(packet) > MAX_PACKET:
+        raise ViscaError(f'reply longer than {MAX_PACKET} bytes: {hex_bytes(packet)}')
+    header, kind = packet[0], packet[1]
+    if header == BROADCAST:
+        if kind == 0x30 and len(packet) == 4:
+            return Reply('address_set', 0, 0, packet, payload=packet[2:3])
+        if packet[1:] == bytes((0x01, 0x00, 0x01, TERMINATOR)):
+            return Reply('if_clear', 0, 0, packet)
+        raise ViscaError(f'unknown broadcast reply: {hex_bytes(packet)}')
+    if header & 0x8F != 0x80 or not 9 <= header >> 4 <= 15:
+        raise ViscaError(f'bad reply header {header:02X}: {hex_bytes(packet)}')
+    address = (header >> 4) - 8
+    high, socket = kind >> 4, kind & 0x0F
+    if kind == 0x38 and len(packet) == 3:
+        return Reply('network_change', address, 0, packet)
+    if high == 0x4 and len(packet) == 3:
+        return Reply('ack', address, socket, packet)
+    if high == 0x5:
+        if len(packet) == 3 and socket != 0:
+            return Reply('completion', address, socket, packet)
+        if socket == 0:
+            return Reply('answer', address, 0, packet, payload=packet[2:-1])
+    if high == 0x6 and len(packet) == 4:
+        return Reply('error', address, socket, packet, code=packet[2])
+    raise ViscaError(f'unknown reply: {hex_bytes(packet)}')
+
+
+def parse_pan_tilt_position(payload: bytes) -> Tuple[int, int]:
+    """Return (pan, tilt) in camera units from the position answer's payload."""
+    if len(payload) != 8:
+        raise ViscaError(f'pan-tilt position answer needs 8 bytes, got {hex_bytes(payload)}')
+    return decode_nibbles(payload[:4]), decode_nibbles(payload[4:])
+
+
+def parse_zoom_position(payload: bytes) -> int:
+    """Return the zoom position (0..3FFh) from the zoom answer's payload."""
+    if len(payload) != 4:
+        raise ViscaError(f'zoom position answer needs 4 bytes, got {hex_bytes(payload)}')
+    return decode_nibbles(payload, signed=False)
+
+
+def parse_power(payload: bytes) -> bool:
+    """Return True when the power answer says on, False for standby."""
+    if len(payload) != 1 or payload[0] not in (POWER_ON, POWER_STANDBY):
+        raise ViscaError(f'power answer is not 02 or 03: {hex_bytes(payload)}')
+    return payload[0] == POWER_ON
+
+
+def parse_max_speed(payload: bytes) -> Tuple[int, int]:
+    """Return the (pan, tilt) maximum speed steps from their answer's payload."""
+    if len(payload) != 2:
+        raise ViscaError(f'max speed answer needs 2 bytes, got {hex_bytes(payload)}')
+    return payload[0], payload[1]
+
+
+def parse_version(payload: bytes) -> Tuple[int, int, int, int]:
+    """Return (vendor, model, ROM version, sockets) from the version answer's payload."""
+    if len(payload) != 7:
+        raise ViscaError(f'version answer needs 7 bytes, got {hex_bytes(payload)}')
+    return ((payload[0] << 8) | payload[1], (payload[2] << 8) | payload[3],
+            (payload[4] << 8) | payload[5], payload[6])
+
+
+# Framing ---------------------------------------------------------------------------------
+
+
+class PacketFramer:
+    """
+    Cut a byte stream into packets: from a header byte (high bit set) to FF.
+
+    Bytes before a header are junk and dropped (counted in ``junk_bytes``);
+    a packet that grows past 16 bytes without FF is dropped as well (counted
+    in ``overlong_packets``: the camera's message length error). Feed it
+    whatever the port returned: partial reads and several packets at once.
+    """
+
+    def __init__(self) -> None:
+        self._buffer = bytearray()
+        self.junk_bytes = 0
+        self.overlong_packets = 0
+
+    def feed(self, data: bytes) -> List[bytes]:
+        """Return the complete packets that ``data`` finishes, in order."""
+        packets = []
+        for byte in data:
+            if not self._buffer:
+                if byte & 0x80 and byte != TERMINATOR:
+                    self._buffer.append(byte)
+                else:
+                    self.junk_bytes += 1
+                continue
+            self._buffer.append(byte)
+            if byte == TERMINATOR:
+                packets.append(bytes(self._buffer))
+                self._buffer.clear()
+            elif len(self._buffer) >= MAX_PACKET:
+                self.junk_bytes += len(self._buffer)
+                self.overlong_packets += 1
+                self._buffer.clear()
+        return packets
+
+    def reset(self) -> None:
+        """Drop a partial packet (after a reconnect)."""
+        self._buffer.clear()

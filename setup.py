@@ -25,6 +25,8 @@ setup(
         'console_scripts': [
             'pattern-locator = pattern_locator.cli:main',
             'locator = pattern_locator.locator_node:main',
+            'camera_driver = pattern_locator.camera_driver_node:main',
+            'sim = pattern_locator.sim_node:main',
         ],
     },
 )

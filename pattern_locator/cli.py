@@ -107,12 +107,19 @@ def _parser() -> argparse.ArgumentParser:
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     play.set_defaults(handler=_bag_play)
 
-    demo = sub.add_parser('demo', help="the paper's 30-image route through a room",
-                          description="Locate the camera along the paper's route and print "
-                                      'the errors in the form of its Table 1.')
+    demo = sub.add_parser('demo', help="the simulated robot on the paper's route (make demo)",
+                          description='Run sim, camera_driver and locator as processes over '
+                                      "DDS along the paper's route; print the errors in the "
+                                      'form of its Table 1 and plot the paths.')
     demo.add_argument('--estimator', choices=ESTIMATORS, default='exact')
-    demo.add_argument('--seed', type=int, default=7)
-    demo.add_argument('--output-dir', default='out', help='where the plot goes (default out/)')
+    demo.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
+    demo.add_argument('--dwell', type=float, default=2.5, help='seconds at each stop')
+    demo.add_argument('--zoom', action='store_true', help='let the driver zoom on the card')
+    demo.add_argument('--core', action='store_true',
+                      help="no ROS: the core alone on the paper's own camera (f = 25 mm)")
+    demo.add_argument('--seed', type=int, default=7, help='seed of --core')
+    demo.add_argument('--output-dir', default='out',
+                      help='where the plot and the node logs go (default out/)')
     demo.set_defaults(handler=_demo)
     return parser
 
@@ -276,8 +283,14 @@ def _bag_play(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from .demo import run_demo
-    return run_demo(estimator=args.estimator, seed=args.seed, output_dir=args.output_dir)
+    if args.core:
+        from .demo import run_demo
+        return run_demo(estimator=args.estimator, seed=args.seed, output_dir=args.output_dir)
+    if not 1 <= args.stops <= 30:
+        raise ConfigError(f'demo: --stops must be 1..30, got {args.stops}')
+    from .demo_system import run_system_demo
+    return run_system_demo(estimator=args.estimator, output_dir=args.output_dir,
+                           n_stops=args.stops, dwell_s=args.dwell, zoom_control=args.zoom)
 
 
 if __name__ == '__main__':

@@ -94,8 +94,12 @@ class HeadGeometry:
     Defaults: a camera on a 1 m mast over ``base_link`` at floor level; the
     tilt axis 5 cm above the pan link, the optical centre 3 cm in front of
     and 5 cm above the tilt axis, so the optical centre is 1.10 m above the
-    floor at tilt 0. Limits: the EVI-D31's travel. Sequences (lists from ROS
-    parameters) are accepted and stored as tuples.
+    floor at tilt 0. ``mount_pitch_rad``: the camera sits on the tilt link
+    pitched up by this much (positive = up), so tilt 0 looks up by it: a
+    head on a mast looking at cards above it gets the EVI-D31's +-25 deg
+    travel where the cards are. Limits: the EVI-D31's travel, in joint
+    angles. Sequences (lists from ROS parameters) are accepted and stored as
+    tuples.
     """
 
     base_to_pan_xyz: Tuple[float, float, float] = (0.0, 0.0, 1.0)
@@ -103,8 +107,13 @@ class HeadGeometry:
     tilt_to_optical_xyz: Tuple[float, float, float] = (0.03, 0.0, 0.05)
     pan_limits_rad: Tuple[float, float] = field(default=EVI_D31_PAN_LIMITS_RAD)
     tilt_limits_rad: Tuple[float, float] = field(default=EVI_D31_TILT_LIMITS_RAD)
+    mount_pitch_rad: float = 0.0
 
     def __post_init__(self):
+        if not (math.isfinite(self.mount_pitch_rad) and abs(self.mount_pitch_rad) < math.pi / 2):
+            raise ConfigError(f'head: mount_pitch_rad must be within +-90 deg, got '
+                              f'{self.mount_pitch_rad!r}')
+        object.__setattr__(self, 'mount_pitch_rad', float(self.mount_pitch_rad))
         for name in ('base_to_pan_xyz', 'pan_to_tilt_xyz', 'tilt_to_optical_xyz'):
             object.__setattr__(self, name, _xyz(getattr(self, name), name))
         for name in ('pan_limits_rad', 'tilt_limits_rad'):
@@ -116,7 +125,7 @@ class HeadGeometry:
 
     def T_pan_tilt(self, tilt: float) -> Pose:
         """Return ``camera_tilt_link`` in ``camera_pan_link``."""
-        return Pose(_rot_tilt(tilt), np.array(self.pan_to_tilt_xyz))
+        return Pose(_rot_tilt(tilt + self.mount_pitch_rad), np.array(self.pan_to_tilt_xyz))
 
     def T_tilt_optical(self) -> Pose:
         """Return ``camera_optical_frame`` in ``camera_tilt_link`` (fixed)."""
@@ -164,7 +173,7 @@ class HeadGeometry:
         r = math.hypot(d, h)
         if r <= abs(b) + 1e-9:
             raise ValueError(f'target {list(target_in_base)} is too close to the tilt axis')
-        tilt = math.atan2(h, d) - math.asin(b / r)
+        tilt = math.atan2(h, d) - math.asin(b / r) - self.mount_pitch_rad
         wrap = 2.0 * math.pi
         return (pan + math.pi) % wrap - math.pi, (tilt + math.pi) % wrap - math.pi
 

@@ -72,7 +72,8 @@ class LocatorNode(Node):
         self.head = HeadGeometry(
             base_to_pan_xyz=tuple(p['head.base_to_pan_xyz']),
             pan_to_tilt_xyz=tuple(p['head.pan_to_tilt_xyz']),
-            tilt_to_optical_xyz=tuple(p['head.tilt_to_optical_xyz']))
+            tilt_to_optical_xyz=tuple(p['head.tilt_to_optical_xyz']),
+            mount_pitch_rad=math.radians(p['head.mount_pitch_deg']))
         self.localizer = RobotLocalizer(
             pattern, building, self.head, estimator=p['estimator'],
             output_frame=p['output_frame'], fusion=p['fusion'],
@@ -146,6 +147,8 @@ class LocatorNode(Node):
                0.0, 10.0)
         number('joint_state_wait_s', 0.05, 'wait this long for a joint state newer than '
                'the image before using the newest one', 0.0, 1.0)
+        number('head.mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this: tilt 0 '
+               'looks up by it (deg)', -60.0, 60.0)
         self.declare_parameter('opencv_threads', 1, ParameterDescriptor(
             description='threads OpenCV may use per frame (0: its default)',
             integer_range=[IntegerRange(from_value=0, to_value=64, step=1)]))
@@ -162,7 +165,8 @@ class LocatorNode(Node):
             'base_frame', 'min_tilt_deg', 'max_reprojection_px', 'use_joint_states',
             'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s', 'joint_state_wait_s',
             'opencv_threads',
-            'head.base_to_pan_xyz', 'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz')}
+            'head.base_to_pan_xyz', 'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz',
+            'head.mount_pitch_deg')}
 
     # Callbacks (executor thread: store only) ---------------------------------------
 
@@ -217,6 +221,8 @@ class LocatorNode(Node):
             except PatternLocatorError as exc:
                 self._problem(str(exc))
             except Exception as exc:  # noqa: B902 - the node must outlive any one frame
+                if not self.context.ok():
+                    return                   # Ctrl-C shut the context down mid-frame
                 self._problem(f'unexpected {type(exc).__name__}: {exc}')
 
     def _process(self, msg: Image) -> None:

@@ -1,5 +1,5 @@
 """
-Run the locator node as a separate process (for the benchmark and the tests).
+Run the package's nodes as separate processes (the demo, the benchmarks, the tests).
 
 The process inherits this process's environment: its ROS domain, localhost
 discovery and Fast DDS profile.
@@ -15,13 +15,14 @@ from typing import Iterator, Sequence
 
 
 @contextmanager
-def locator_process(log: Path, parameters: Sequence[str]) -> Iterator[subprocess.Popen]:
+def node_process(module: str, log: Path, parameters: Sequence[str] = ()
+                 ) -> Iterator[subprocess.Popen]:
     """
-    Run the locator node as a process (its output in ``log``); Ctrl-C it at the end.
+    Run ``python -m pattern_locator.<module>`` (its output in ``log``); Ctrl-C it at the end.
 
     ``parameters`` are ``name:=value`` strings.
     """
-    args = [sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args']
+    args = [sys.executable, '-m', f'pattern_locator.{module}', '--ros-args']
     for parameter in parameters:
         args += ['-p', parameter]
     with open(log, 'w') as out:
@@ -38,3 +39,8 @@ def locator_process(log: Path, parameters: Sequence[str]) -> Iterator[subprocess
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def locator_process(log: Path, parameters: Sequence[str]):
+    """Run the locator node as a process; see :func:`node_process`."""
+    return node_process('locator_node', log, parameters)

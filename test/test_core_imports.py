@@ -6,7 +6,8 @@ import sys
 CORE = ['pattern', 'camera', 'geometry', 'detector', 'pose_exact', 'pose_paper', 'locate',
         'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli',
         'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags', 'overlay',
-        'node_process']
+        'node_process', 'visca', 'visca_emulator', 'visca_transport', 'visca_camera',
+        'tracking', 'sim_world', 'zoom_table']
 
 
 def test_core_modules_do_not_import_rclpy():

@@ -1,0 +1,344 @@
+"""
+``pattern-locator demo``: the whole system in closed loop, as on the robot.
+
+Three processes talk over DDS (localhost discovery): ``sim`` (the robot
+drives the paper's route through floor 1 room 3 and renders what its head
+camera sees; it owns an emulated EVI-D31 on a pseudo-terminal),
+``camera_driver`` (drives that camera over VISCA and keeps the card
+centred) and ``locator`` (finds the robot from the images). This process
+only watches: it matches every published location with the simulator's
+ground truth at the same image stamp, and at the end prints, per stop, the
+true and located positions with the ids, the errors in the form of the
+paper's Table 1 beside the paper's own figures, and a plot of both paths.
+"""
+
+from dataclasses import dataclass
+import math
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .building import BuildingMap, load_building
+from .demo import PAPER_TABLE1, plot_paths, StopResult, summary_table
+from .errors import PatternLocatorError
+from .geometry import Pose, rotation_from_quaternion
+from .head import HeadGeometry, JointStateBuffer
+from .node_process import node_process
+from .resources import config_path
+from .sim_world import SimRoute
+
+FLOOR, ROOM = 1, 3
+# The demo robot's camera looks up 15 deg at tilt 0: the route passes as close
+# as 1.2 m under cards 1.05 m above the lens, beyond the EVI-D31's +25 deg.
+MOUNT_PITCH_DEG = 15.0
+CENTRED_DEG = 2.0
+# One sweep at this tilt sees cards 6..44 deg above the horizon (wide zoom).
+SEARCH_TILT_DEG = 10.0
+
+
+@dataclass
+class Frame:
+    """What is known about one image stamp: truth, location, head angles."""
+
+    true_base: Optional[Pose] = None
+    true_camera: Optional[Pose] = None
+    located_base: Optional[Pose] = None
+    ids: Optional[Tuple[int, int, int]] = None
+    true_target: Optional[Tuple[float, float, int]] = None
+
+
+def pose_from_msg(msg) -> Pose:
+    """Return the Pose of a geometry_msgs/Pose."""
+    q = msg.orientation
+    return Pose(rotation_from_quaternion(np.array([q.x, q.y, q.z, q.w])),
+                np.array([msg.position.x, msg.position.y, msg.position.z]))
+
+
+def stop_of(route: SimRoute, true_base: Pose, tolerance_m: float = 1e-3) -> Optional[int]:
+    """Return the route stop the base stands at (None while driving between stops)."""
+    for index, stop in enumerate(route.stops):
+        if math.dist(stop.position, true_base.t[:2]) < tolerance_m:
+            return index
+    return None
+
+
+def camera_errors(located: Pose, true: Pose, T_room_card: Pose) -> Dict[str, float]:
+    """
+    Return the Table 1 errors of a located camera pose against the true one.
+
+    phi, theta and D' are the paper's angles of the camera position in the
+    card frame (method.md); x, y, z the camera position in the room frame.
+    """
+    def angles(T_room_camera: Pose) -> Tuple[float, float, float]:
+        c = T_room_card.inverse().apply(T_room_camera.t[None])[0]
+        distance = float(np.linalg.norm(c))
+        phi = math.degrees(math.acos(float(np.clip(c[2] / distance, -1.0, 1.0))))
+        theta = math.degrees(math.atan2(c[0], c[1]))
+        return phi, theta, distance
+
+    phi_e, theta_e, d_e = angles(located)
+    phi_t, theta_t, d_t = angles(true)
+    dx = np.abs(located.t - true.t) * 100.0
+    return {
+        'phi (deg)': abs(phi_e - phi_t),
+        'theta (deg)': abs((theta_e - theta_t + 180.0) % 360.0 - 180.0),
+        "D' (cm)": abs(d_e - d_t) * 100.0,
+        'x (cm)': float(dx[0]), 'y (cm)': float(dx[1]), 'z (cm)': float(dx[2]),
+    }
+
+
+def evaluate(frames: Dict[int, Frame], joints: JointStateBuffer, route: SimRoute,
+             building: BuildingMap, head: HeadGeometry) -> List[StopResult]:
+    """
+    Return one result per route stop: its last located image, against the truth.
+
+    The located camera is the located base moved through the head at the
+    angles the driver reported for the image's stamp (what the locator used).
+    """
+    last: Dict[int, Tuple[int, Frame]] = {}
+    seen: Dict[int, Frame] = {}
+    centred_at = set()
+    for stamp in sorted(frames):
+        frame = frames[stamp]
+        if frame.true_base is None or frame.true_camera is None:
+            continue
+        index = stop_of(route, frame.true_base)
+        if index is None:
+            continue
+        seen[index] = frame
+        if frame.located_base is not None and frame.ids is not None:
+            # The paper took each stop's image with the card centred: prefer
+            # the stop's last such image, else its last located one.
+            centred = frame.true_target is not None and math.degrees(
+                math.hypot(frame.true_target[0], frame.true_target[1])) < CENTRED_DEG
+            if centred or index not in centred_at:
+                last[index] = (stamp, frame)
+            if centred:
+                centred_at.add(index)
+    results = []
+    for index, stop in enumerate(route.stops):
+        truth = seen.get(index)
+        true_position = (truth.true_camera.t if truth is not None
+                         else np.array([*stop.position, math.nan]))
+        if index not in last:
+            results.append(StopResult(index, stop.card, true_position, None, False, None))
+            continue
+        stamp, frame = last[index]
+        try:
+            pan, tilt = joints.at(stamp * 1e-9)
+        except Exception:  # noqa: B902 - no head angles for this stamp: not located
+            results.append(StopResult(index, stop.card, true_position, None, False, None))
+            continue
+        located_camera = frame.located_base @ head.T_base_camera(pan, tilt)
+        ids_ok = frame.ids[:2] == (FLOOR, ROOM)
+        card = building.card(frame.ids).T_room_card if ids_ok else None
+        errors = camera_errors(located_camera, frame.true_camera, card) if ids_ok else None
+        results.append(StopResult(index, frame.ids[2], frame.true_camera.t,
+                                  located_camera.t, ids_ok, errors))
+    return results
+
+
+def tracking_errors_deg(frames: Dict[int, Frame]) -> np.ndarray:
+    """Return the angle (degrees) between the optical axis and the route's card, per image."""
+    values = [math.degrees(math.hypot(f.true_target[0], f.true_target[1]))
+              for f in frames.values() if f.true_target is not None]
+    return np.array(values)
+
+
+class Observer:
+    """A node in this process that records the truth, the locations and the head angles."""
+
+    def __init__(self, context) -> None:
+        from geometry_msgs.msg import PointStamped, PoseStamped
+        import rclpy
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import UInt16MultiArray
+
+        self.node = rclpy.create_node('demo_observer', context=context)
+        self.frames: Dict[int, Frame] = {}
+        self.joints = JointStateBuffer(history_s=600.0, max_gap_s=0.5)
+        self.last_ids: Dict[int, Tuple[int, int, int]] = {}
+        self.located = 0
+        n = self.node
+        n.create_subscription(PoseStamped, '/sim/true_pose',
+                              lambda m: self._put(m, 'true_base', pose_from_msg(m.pose)), 100)
+        n.create_subscription(PoseStamped, '/sim/true_camera_pose',
+                              lambda m: self._put(m, 'true_camera', pose_from_msg(m.pose)), 100)
+        n.create_subscription(PointStamped, '/sim/true_target', lambda m: self._put(
+            m, 'true_target', (m.point.x, m.point.y, int(m.point.z))), 100)
+        n.create_subscription(PoseStamped, '/robot_location', self._on_location, 100)
+        n.create_subscription(UInt16MultiArray, '/robot_location/ids', self._on_ids, 100)
+        n.create_subscription(JointState, '/camera/joint_states', self._on_joints,
+                              qos_profile_sensor_data)
+        self._stamp_of_ids: List[Tuple[int, int, int]] = []
+
+    @staticmethod
+    def _key(msg) -> int:
+        return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+    def _put(self, msg, field: str, value) -> None:
+        setattr(self.frames.setdefault(self._key(msg), Frame()), field, value)
+
+    def _on_location(self, msg) -> None:
+        self.located += 1
+        frame = self.frames.setdefault(self._key(msg), Frame())
+        frame.located_base = pose_from_msg(msg.pose)
+        if self._stamp_of_ids:
+            frame.ids = self._stamp_of_ids.pop(0)
+
+    def _on_ids(self, msg) -> None:
+        # /robot_location/ids has no header: it is published right after
+        # each pose, so the n-th ids belong to the n-th pose.
+        ids = tuple(int(v) for v in msg.data)
+        pending = [f for f in self.frames.values() if f.located_base is not None and f.ids is None]
+        if pending:
+            pending[-1].ids = ids
+        else:
+            self._stamp_of_ids.append(ids)
+
+    def _on_joints(self, msg) -> None:
+        names = list(msg.name)
+        if 'camera_pan' in names and 'camera_tilt' in names:
+            self.joints.add(self._key(msg) * 1e-9, msg.position[names.index('camera_pan')],
+                            msg.position[names.index('camera_tilt')])
+
+
+def print_results(results: List[StopResult]) -> Tuple[int, int]:
+    """Print the per-stop table; return (located, wrong ids)."""
+    print(f'{"stop":>4} {"card":>4}  {"true camera x, y, z (m)":>23}  '
+          f'{"located x, y, z (m)":>22}  {"error (cm)":>10}  ids')
+    for r in results:
+        t = r.true_position
+        if r.located is None:
+            print(f'{r.index + 1:>4} {"-":>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
+                  f'{"not located":>22}')
+            continue
+        e = r.located
+        print(f'{r.index + 1:>4} {r.card:>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
+              f'{e[0]:6.3f} {e[1]:6.3f} {e[2]:6.3f}  {np.linalg.norm(e - t) * 100:10.2f}  '
+              f'{f"{FLOOR}/{ROOM}/{r.card}" if r.ids_ok else "WRONG"}')
+    located = sum(r.located is not None for r in results)
+    wrong = sum(r.located is not None and not r.ids_ok for r in results)
+    return located, wrong
+
+
+def route_stops_parameter(route: SimRoute) -> str:
+    """Return the sim's ``route_stops`` parameter that gives ``route``."""
+    values = [v for stop in route.stops for v in (
+        stop.position[0], stop.position[1], math.degrees(stop.heading), float(stop.card))]
+    return 'route_stops:=[' + ', '.join(f'{v:.6f}' for v in values) + ']'
+
+
+def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
+                    zoom_control: bool = False, timeout_s: float = 150.0,
+                    driver_parameters: Sequence[str] = (), custom_route: bool = False
+                    ) -> Observer:
+    """
+    Run sim, camera_driver and locator as processes along ``route``; return what was seen.
+
+    Ends when the robot has been at the route's last stop for its dwell
+    time (or after ``timeout_s``, with a message). Node logs go to ``out``.
+    ``custom_route``: the sim is given the route's stops (else it builds the
+    paper route from the stop count, which must give the same route).
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
+                          str(config_path('fastdds_large_messages.xml')))
+    out.mkdir(parents=True, exist_ok=True)
+    context = Context()
+    rclpy.init(context=context)
+    observer = Observer(context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(observer.node)
+    link = Path(tempfile.mkdtemp(prefix='pattern_locator_demo_')) / 'evi_d31'
+    try:
+        with node_process('sim_node', out / 'sim.log', [
+                f'camera_link:={link}', f'n_stops:={len(route.stops)}',
+                f'dwell_s:={route.dwell_s}', f'mode:={route.mode}',
+                f'speed_m_s:={route.speed_m_s}',
+                f'head_mount_pitch_deg:={MOUNT_PITCH_DEG}',
+                *([route_stops_parameter(route)] if custom_route else [])]) as sim, \
+                node_process('camera_driver_node', out / 'camera_driver.log', [
+                    f'port:={link}', f'zoom_control:={str(zoom_control).lower()}',
+                    # Stops are far apart: look for the next card soon and briskly.
+                    'search_after_s:=1.0', 'search_speed_deg_s:=30.0',
+                    f'search_tilt_levels_deg:=[{SEARCH_TILT_DEG}]',
+                    *driver_parameters]) as driver, \
+                node_process('locator_node', out / 'locator.log', [
+                    f'estimator:={estimator}',
+                    f'head.mount_pitch_deg:={MOUNT_PITCH_DEG}']) as locator:
+            at_last_stop = None
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.1)
+                for proc, name in ((sim, 'sim'), (driver, 'camera_driver'),
+                                   (locator, 'locator')):
+                    if proc.poll() is not None:
+                        raise PatternLocatorError(f'{name} exited with {proc.returncode}; '
+                                                  f'see {proc.log}')
+                newest = max((k for k, f in observer.frames.items()
+                              if f.true_base is not None), default=None)
+                index = (stop_of(route, observer.frames[newest].true_base)
+                         if newest is not None else None)
+                if index == len(route.stops) - 1:
+                    at_last_stop = at_last_stop or time.monotonic()
+                    if time.monotonic() - at_last_stop > route.dwell_s + 0.3:
+                        break
+                else:
+                    at_last_stop = None
+            else:
+                print(f'demo: the route did not finish within {timeout_s:.0f} s',
+                      file=sys.stderr)
+    finally:
+        executor.shutdown()
+        observer.node.destroy_node()
+        rclpy.shutdown(context=context)
+        try:
+            link.parent.rmdir()
+        except OSError:
+            pass
+    return observer
+
+
+def run_system_demo(estimator: str = 'exact', output_dir: str = 'out', n_stops: int = 30,
+                    dwell_s: float = 2.5, mode: str = 'stops', timeout_s: float = 150.0,
+                    zoom_control: bool = False) -> int:
+    """Run sim, camera_driver and locator as processes; print the results; 0 if all is well."""
+    out = Path(output_dir)
+    route = SimRoute.paper_route(mode=mode, dwell_s=dwell_s, n_stops=n_stops)
+    print(f'pattern_locator demo: sim + camera_driver + locator over DDS (domain '
+          f"{os.environ.get('ROS_DOMAIN_ID', '0')}), the paper's route: {n_stops} stops in "
+          f'floor {FLOOR} room {ROOM}, {estimator} estimator, EVI-D31 emulated on a '
+          f'pseudo-terminal; logs in {out}/', flush=True)
+    started = time.monotonic()
+    observer = run_closed_loop(out, route, estimator, zoom_control, timeout_s)
+    building = load_building()
+    head = HeadGeometry(mount_pitch_rad=math.radians(MOUNT_PITCH_DEG))
+    results = evaluate(observer.frames, observer.joints, route, building, head)
+    located, wrong = print_results(results)
+    tracking = tracking_errors_deg(observer.frames)
+    print(f'\nlocated {located}/{len(results)} stops, wrong floor/room/card: {wrong}; '
+          f'{observer.located} locations published in {time.monotonic() - started:.0f} s')
+    if tracking.size:
+        print(f'card centre off the optical axis: median {np.median(tracking):.2f} deg, '
+              f'p95 {np.percentile(tracking, 95):.2f} deg over {tracking.size} images')
+    print("\nTable 1 form (absolute errors of the camera's position), this run and the "
+          "paper's:")
+    print(summary_table(results))
+    plot = out / f'demo_route_{estimator}.png'
+    plot_paths(results, plot)
+    print(f'\nplot of the true and computed paths: {plot}', flush=True)
+    return 0 if located == len(results) and wrong == 0 else 1
+
+
+__all__ = ['run_system_demo', 'evaluate', 'camera_errors', 'PAPER_TABLE1']

@@ -1,0 +1,41 @@
+"""Small helpers of the nodes: parameters with a description and a range, poses."""
+
+from typing import Any, Dict, Iterable
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+
+from .geometry import Pose, quaternion_xyzw
+
+
+def declare_number(node: Node, name: str, value: float, description: str,
+                   low: float, high: float) -> None:
+    """Declare a floating-point parameter limited to [low, high]."""
+    node.declare_parameter(name, float(value), ParameterDescriptor(
+        description=description,
+        floating_point_range=[FloatingPointRange(from_value=float(low), to_value=float(high))]))
+
+
+def declare_integer(node: Node, name: str, value: int, description: str,
+                    low: int, high: int) -> None:
+    """Declare an integer parameter limited to [low, high]."""
+    node.declare_parameter(name, int(value), ParameterDescriptor(
+        description=description,
+        integer_range=[IntegerRange(from_value=int(low), to_value=int(high), step=1)]))
+
+
+def declare_value(node: Node, name: str, value: Any, description: str) -> None:
+    """Declare a parameter without a range (text, booleans, lists)."""
+    node.declare_parameter(name, value, ParameterDescriptor(description=description))
+
+
+def parameter_values(node: Node, names: Iterable[str]) -> Dict[str, Any]:
+    """Return the current values of the named parameters."""
+    return {name: node.get_parameter(name).value for name in names}
+
+
+def fill_pose(msg: Any, T: Pose) -> None:
+    """Write a Pose into a geometry_msgs/Pose."""
+    msg.position.x, msg.position.y, msg.position.z = (float(v) for v in T.t)
+    (msg.orientation.x, msg.orientation.y, msg.orientation.z,
+     msg.orientation.w) = (float(v) for v in quaternion_xyzw(T.R))

@@ -89,6 +89,8 @@ def _parser() -> argparse.ArgumentParser:
                        help='scenes per distance bin and camera (default 40)')
     bench.add_argument('--seed', type=int, default=1)
     bench.add_argument('--quick', action='store_true', help='a small run for smoke tests')
+    bench.add_argument('--tracking', action='store_true',
+                       help='the tracking loop in closed loop (sim + camera_driver + locator)')
     bench.add_argument('--node', action='store_true',
                        help='the locator node end to end over DDS: throughput and latency')
     bench.set_defaults(handler=_bench)
@@ -106,6 +108,14 @@ def _parser() -> argparse.ArgumentParser:
     play.add_argument('bag', help='bag directory (or .mcap / .db3 file)')
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     play.set_defaults(handler=_bag_play)
+
+    fake = sub.add_parser('fake-camera', help='an emulated EVI-D31 on a pseudo-terminal',
+                          description='Start an emulated Sony EVI-D31 answering VISCA on a '
+                                      'pseudo-terminal; print its port; run until Ctrl-C.')
+    fake.add_argument('--link', help='also reach it through this path (a symlink)')
+    fake.add_argument('--init-s', type=float, default=2.0,
+                      help='power-up initialisation time (default 2 s)')
+    fake.set_defaults(handler=_fake_camera)
 
     demo = sub.add_parser('demo', help="the simulated robot on the paper's route (make demo)",
                           description='Run sim, camera_driver and locator as processes over '
@@ -265,6 +275,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.tracking:
+        from .bench_tracking import run_tracking_bench
+        return run_tracking_bench()
     if args.node:
         from .bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
@@ -280,6 +293,11 @@ def _bag_record(args: argparse.Namespace) -> int:
 def _bag_play(args: argparse.Namespace) -> int:
     from .bags import play_main
     return play_main(args.bag, rate=args.rate)
+
+
+def _fake_camera(args: argparse.Namespace) -> int:
+    from .visca_emulator import run_fake_camera
+    return run_fake_camera(args.link, args.init_s)
 
 
 def _demo(args: argparse.Namespace) -> int:

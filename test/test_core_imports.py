@@ -7,7 +7,7 @@ CORE = ['pattern', 'camera', 'geometry', 'detector', 'pose_exact', 'pose_paper',
         'printable', 'render', 'baselines', 'bench', 'demo', 'paper_setup', 'cli',
         'image_codec', 'head', 'building', 'localizer', 'bench_node', 'bags', 'overlay',
         'node_process', 'visca', 'visca_emulator', 'visca_transport', 'visca_camera',
-        'tracking', 'sim_world', 'zoom_table']
+        'tracking', 'sim_world', 'zoom_table', 'head_loop', 'bench_tracking', 'demo_system']
 
 
 def test_core_modules_do_not_import_rclpy():

@@ -182,3 +182,23 @@ def test_camera_errors_are_the_papers_quantities():
     assert errors['phi (deg)'] == pytest.approx(math.degrees(math.atan2(0.01, 2.0)), rel=1e-6)
     assert errors['theta (deg)'] == pytest.approx(90.0)
     assert errors["D' (cm)"] == pytest.approx((math.hypot(0.01, 2.0) - 2.0) * 100.0)
+
+
+def test_fake_camera_command_prints_its_port_and_answers_visca(tmp_path):
+    import serial
+    from pattern_locator import visca
+    link = tmp_path / 'cam'
+    proc = subprocess.Popen([sys.executable, '-m', 'pattern_locator.cli', 'fake-camera',
+                             '--link', str(link), '--init-s', '0.1'],
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.strip() == f'fake EVI-D31 on {link}', line
+        with serial.Serial(str(link), 9600, timeout=1.0) as port:
+            port.write(visca.address_set())
+            assert port.read(4) == visca.address_set_reply(2)
+            port.write(visca.inquiry_power(1))
+            assert port.read(4) == visca.answer(1, bytes((visca.POWER_ON,)))
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=10) == 0

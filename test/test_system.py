@@ -145,7 +145,9 @@ def test_closed_loop_centres_the_card_and_keeps_it_centred_while_driving(tmp_pat
     phases = _tracking_errors(observer.frames, route)
     first, driving = phases['first'], phases['driving']
     assert first and driving and phases['last'], {k: len(v) for k, v in phases.items()}
-    assert first[0][1] > 10.0                                 # it starts well off-centre
+    # The head comes out of its power-up sweep at home with the card 18 deg
+    # off, but the observer may join after the first frames, so the start is
+    # not asserted here (bench --tracking measures the time to centre).
     settled = [e for s, e in first if s > first[-1][0] - 1.5e9]
     assert max(settled) < 1.0, settled                        # centred before it drives
     # The sim's robot goes from 0 to 0.3 m/s in an instant: the first half

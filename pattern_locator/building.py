@@ -26,7 +26,7 @@ import yaml
 from .errors import CodeError, ConfigError, PrintError
 from .geometry import Pose, rotation_from_quaternion
 from .pattern import Code, Ids, load_pattern_config, PatternConfig
-from .resources import config_path
+from .resources import config_path, read_yaml
 
 DEFAULT_FRAME = 'building'
 TOLERANCE = 1e-6          # unit quaternion / orthonormal rotation, as the file must give them
@@ -205,20 +205,7 @@ def load_building(path: Optional[Union[str, Path]] = None,
     """
     path = Path(path) if path is not None else config_path('building.yaml')
     pattern = pattern if pattern is not None else load_pattern_config()
-    try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.load(stream, Loader=_UniqueKeyLoader)
-    except OSError as exc:
-        raise ConfigError(f'{path}: cannot read the building map ({exc.strerror or exc})'
-                          ) from None
-    except UnicodeDecodeError:
-        raise ConfigError(f'{path}: the building map is not UTF-8 text') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        problem = getattr(exc, 'problem', None)
-        raise ConfigError(f'{path}: malformed YAML{where}' + (f': {problem}' if problem else '')
-                          ) from None
+    data = read_yaml(path, 'the building map', loader=_UniqueKeyLoader)
     return building_from_dict(data, pattern, str(path))
 
 

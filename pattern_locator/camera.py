@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 
 from .errors import CameraError
+from .resources import read_yaml
 
 DISTORTION_MODELS = ('plumb_bob', 'rational_polynomial', 'equidistant', 'none')
 
@@ -203,15 +204,7 @@ def camera_from_dict(data: dict, source: str = 'camera') -> CameraModel:
 def load_camera(path: Union[str, Path]) -> CameraModel:
     """Load a ROS camera-info YAML file; CameraError in one readable line if bad."""
     path = Path(path)
-    try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.safe_load(stream)
-    except OSError as exc:
-        raise CameraError(f'{path}: cannot read camera file ({exc.strerror})') from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        raise CameraError(f'{path}: malformed YAML{where}') from None
+    data = read_yaml(path, 'camera file', error=CameraError)
     return camera_from_dict(data, str(path))
 
 

@@ -26,15 +26,12 @@ Services (std_srvs/Trigger): ~/home, ~/reset.
 """
 
 import math
-import sys
 import threading
 import time
-from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, JointState
@@ -43,7 +40,8 @@ from std_srvs.srv import Trigger
 from .errors import PatternLocatorError
 from .head_loop import HeadLoop, HeadReading
 from .image_codec import fill_camera_info
-from .ros_helpers import declare_integer, declare_number, declare_value, parameter_values
+from .ros_helpers import (declare_integer, declare_number, declare_value, parameter_values,
+                          run_node, stamp_seconds)
 from .tracking import TrackingController, TrackingParams
 from .visca import ViscaError
 from .visca_camera import EviD31
@@ -55,10 +53,6 @@ PARAMETERS = (
     'tilt_limits_deg', 'target_timeout_s', 'search', 'search_after_s', 'search_speed_deg_s',
     'search_tilt_levels_deg', 'zoom_control', 'target_size_px', 'zoom_table', 'zoom_every',
     'pan_joint', 'tilt_joint', 'zoom_joint', 'camera_frame')
-
-
-def _stamp_s(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 class CameraDriverNode(Node):
@@ -161,7 +155,7 @@ class CameraDriverNode(Node):
             self.get_logger().warning(f'ignored a target with non-finite values {values}',
                                       throttle_duration_sec=5.0)
             return
-        self.loop.on_target(_stamp_s(msg.header.stamp), *values)
+        self.loop.on_target(stamp_seconds(msg.header.stamp), *values)
 
     def _trigger(self, action: str, response: Trigger.Response) -> Trigger.Response:
         if not self.camera.ready:
@@ -274,26 +268,7 @@ class CameraDriverNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    code = 0
-    node: Optional[CameraDriverNode] = None
-    try:
-        node = CameraDriverNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PatternLocatorError as exc:
-        print(f'camera_driver: error: {exc}', file=sys.stderr, flush=True)
-        code = 1
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        sys.exit(code)
+    run_node(CameraDriverNode, 'camera_driver', args)
 
 
 if __name__ == '__main__':

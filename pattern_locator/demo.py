@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import math
 from pathlib import Path
 import sys
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -140,25 +140,30 @@ def plot_paths(results: List[StopResult], path: Path) -> None:
     cv2.imwrite(str(path), img)
 
 
-def run_demo(estimator: str = 'exact', seed: int = 7, output_dir: str = 'out') -> int:
-    print(f"pattern_locator demo: the paper's route, {estimator} estimator "
-          f'(f = 25 mm, 640x480, cards at 2.15 m, camera at 1.10 m)')
-    results = run_route(estimator, seed)
-    print(f'{"stop":>4} {"card":>4}  {"true x, y, z (m)":>22}  {"located x, y, z (m)":>22}'
+def print_results(results: List[StopResult], true_label: str) -> Tuple[int, int]:
+    """Print the per-stop table (true and located positions, ids); return (located, wrong)."""
+    print(f'{"stop":>4} {"card":>4}  {true_label:>23}  {"located x, y, z (m)":>22}'
           f'  {"error (cm)":>10}  ids')
     for r in results:
         t = r.true_position
         if r.located is None:
-            print(f'{r.index + 1:>4} {r.card:>4}  {t[0]:6.3f} {t[1]:6.3f} {t[2]:6.3f}  '
+            print(f'{r.index + 1:>4} {"-":>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
                   f'{"not located":>22}')
             continue
         e = r.located
-        err = np.linalg.norm(e - t) * 100.0
-        print(f'{r.index + 1:>4} {r.card:>4}  {t[0]:6.3f} {t[1]:6.3f} {t[2]:6.3f}  '
-              f'{e[0]:6.3f} {e[1]:6.3f} {e[2]:6.3f}  {err:10.2f}  '
-              f'{"ok" if r.ids_ok else "WRONG"}')
+        print(f'{r.index + 1:>4} {r.card:>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
+              f'{e[0]:6.3f} {e[1]:6.3f} {e[2]:6.3f}  {np.linalg.norm(e - t) * 100:10.2f}  '
+              f'{f"{FLOOR}/{ROOM}/{r.card}" if r.ids_ok else "WRONG"}')
     located = sum(r.located is not None for r in results)
     wrong = sum(r.located is not None and not r.ids_ok for r in results)
+    return located, wrong
+
+
+def run_demo(estimator: str = 'exact', seed: int = 7, output_dir: str = 'out') -> int:
+    print(f"pattern_locator demo: the paper's route, {estimator} estimator "
+          f'(f = 25 mm, 640x480, cards at 2.15 m, camera at 1.10 m)')
+    results = run_route(estimator, seed)
+    located, wrong = print_results(results, 'true x, y, z (m)')
     print(f'\nlocated {located}/{len(results)} images, wrong floor/room/card: {wrong}')
     print("\nTable 1 form (absolute errors), this run and the paper's:")
     print(summary_table(results))

@@ -24,7 +24,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .building import BuildingMap, load_building
-from .demo import PAPER_TABLE1, plot_paths, StopResult, summary_table
+from .demo import PAPER_TABLE1, plot_paths, print_results, StopResult, summary_table
 from .errors import PatternLocatorError
 from .geometry import Pose, rotation_from_quaternion
 from .head import HeadGeometry, JointStateBuffer
@@ -219,25 +219,6 @@ class Observer:
                             msg.position[names.index('camera_tilt')])
 
 
-def print_results(results: List[StopResult]) -> Tuple[int, int]:
-    """Print the per-stop table; return (located, wrong ids)."""
-    print(f'{"stop":>4} {"card":>4}  {"true camera x, y, z (m)":>23}  '
-          f'{"located x, y, z (m)":>22}  {"error (cm)":>10}  ids')
-    for r in results:
-        t = r.true_position
-        if r.located is None:
-            print(f'{r.index + 1:>4} {"-":>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
-                  f'{"not located":>22}')
-            continue
-        e = r.located
-        print(f'{r.index + 1:>4} {r.card:>4}  {t[0]:7.3f} {t[1]:7.3f} {t[2]:7.3f}  '
-              f'{e[0]:6.3f} {e[1]:6.3f} {e[2]:6.3f}  {np.linalg.norm(e - t) * 100:10.2f}  '
-              f'{f"{FLOOR}/{ROOM}/{r.card}" if r.ids_ok else "WRONG"}')
-    located = sum(r.located is not None for r in results)
-    wrong = sum(r.located is not None and not r.ids_ok for r in results)
-    return located, wrong
-
-
 def route_stops_parameter(route: SimRoute) -> str:
     """Return the sim's ``route_stops`` parameter that gives ``route``."""
     values = [v for stop in route.stops for v in (
@@ -335,7 +316,7 @@ def run_system_demo(estimator: str = 'exact', output_dir: str = 'out', n_stops: 
     building = load_building()
     head = HeadGeometry(mount_pitch_rad=math.radians(MOUNT_PITCH_DEG))
     results = evaluate(observer.frames, observer.joints, route, building, head)
-    located, wrong = print_results(results)
+    located, wrong = print_results(results, 'true camera x, y, z (m)')
     tracking = tracking_errors_deg(observer.frames)
     print(f'\nlocated {located}/{len(results)} stops, wrong floor/room/card: {wrong}; '
           f'{observer.located} locations published in {time.monotonic() - started:.0f} s')

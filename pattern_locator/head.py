@@ -76,13 +76,14 @@ def _xyz(value, name: str) -> Tuple[float, float, float]:
     return xyz
 
 
-def _limits(value, name: str) -> Tuple[float, float]:
+def limit_pair(value, name: str, owner: str = 'head geometry') -> Tuple[float, float]:
+    """Return travel limits (min, max) in radians; ConfigError naming ``owner`` if bad."""
     try:
         lo, hi = (float(v) for v in value)
     except (TypeError, ValueError):
-        raise ConfigError(f'head geometry: {name} must be (min, max) in radians, got {value!r}')
+        raise ConfigError(f'{owner}: {name} must be (min, max) in radians, got {value!r}')
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise ConfigError(f'head geometry: {name} must be finite with min < max, got {value!r}')
+        raise ConfigError(f'{owner}: {name} must be finite with min < max, got {value!r}')
     return lo, hi
 
 
@@ -117,7 +118,7 @@ class HeadGeometry:
         for name in ('base_to_pan_xyz', 'pan_to_tilt_xyz', 'tilt_to_optical_xyz'):
             object.__setattr__(self, name, _xyz(getattr(self, name), name))
         for name in ('pan_limits_rad', 'tilt_limits_rad'):
-            object.__setattr__(self, name, _limits(getattr(self, name), name))
+            object.__setattr__(self, name, limit_pair(getattr(self, name), name))
 
     def T_base_pan(self, pan: float) -> Pose:
         """Return ``camera_pan_link`` in ``base_link``."""

@@ -43,18 +43,14 @@ from std_msgs.msg import MultiArrayDimension, UInt16MultiArray
 from .building import load_building
 from .camera import CameraModel
 from .errors import PatternLocatorError
-from .geometry import quaternion_xyzw
 from .head import angles_from_joint_state, HeadGeometry, JointStateBuffer
 from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .localizer import FrameResult, RobotLocalizer
 from .overlay import draw_overlay
 from .pattern import load_pattern_config
+from .ros_helpers import fill_pose, stamp_seconds
 
 THROTTLE_S = 5.0
-
-
-def _stamp_seconds(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 class LocatorNode(Node):
@@ -193,7 +189,7 @@ class LocatorNode(Node):
         except PatternLocatorError as exc:
             self._problem(f'joint states: {exc}')
             return
-        stamp = _stamp_seconds(msg.header.stamp)
+        stamp = stamp_seconds(msg.header.stamp)
         latest = self.joints.latest()
         if latest is not None and stamp < latest[0] - 1.0:
             # Time went backwards (a bag replayed again, a simulator reset).
@@ -246,7 +242,7 @@ class LocatorNode(Node):
     def _head_angles(self, msg: Image) -> Tuple[float, float]:
         if not self.use_joint_states:
             return self.fixed_angles
-        stamp = _stamp_seconds(msg.header.stamp)
+        stamp = stamp_seconds(msg.header.stamp)
         # An image can overtake the joint state taken just after it: wait a
         # little for a sample on its far side rather than hold an old one.
         deadline = time.monotonic() + self.joint_wait_s
@@ -293,11 +289,7 @@ class LocatorNode(Node):
         pose = PoseStamped()
         pose.header.stamp = header.stamp
         pose.header.frame_id = fix.frame_id
-        p = fix.T_frame_base.t
-        q = quaternion_xyzw(fix.T_frame_base.R)
-        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in p)
-        (pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z,
-         pose.pose.orientation.w) = (float(v) for v in q)
+        fill_pose(pose.pose, fix.T_frame_base)
         with_cov = PoseWithCovarianceStamped()
         with_cov.header = pose.header
         with_cov.pose.pose = pose.pose

@@ -18,10 +18,9 @@ import re
 from typing import Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
-import yaml
 
 from .errors import CodeError, ConfigError
-from .resources import config_path
+from .resources import config_path, read_yaml
 
 COLOURS = 'KRGB'
 RING_POINTS = 8
@@ -320,13 +319,5 @@ def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConf
 def load_pattern_config(path: Optional[Union[str, Path]] = None) -> PatternConfig:
     """Load a pattern YAML (default: the shipped ``config/pattern.yaml``)."""
     path = Path(path) if path is not None else config_path('pattern.yaml')
-    try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.safe_load(stream)
-    except OSError as exc:
-        raise ConfigError(f'{path}: cannot read pattern configuration ({exc.strerror})')
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f' at line {mark.line + 1}' if mark is not None else ''
-        raise ConfigError(f'{path}: malformed YAML{where}')
+    data = read_yaml(path, 'pattern configuration')
     return pattern_config_from_dict(data, str(path))

@@ -296,7 +296,7 @@ def _in_polygon(px: np.ndarray, py: np.ndarray, polygon: np.ndarray) -> np.ndarr
     return inside.reshape(shape)
 
 
-def _clip_in_front(points: np.ndarray) -> np.ndarray:
+def clip_in_front(points: np.ndarray) -> np.ndarray:
     """Clip a closed 3D polygon (camera frame) to z >= NEAR_PLANE."""
     out = []
     for a, b in zip(points, np.roll(points, -1, axis=0)):
@@ -364,7 +364,7 @@ class _Surface:
         normalised = []
         for outline in self.outlines():
             points = self.pose.apply(np.column_stack([outline, np.zeros(len(outline))]))
-            front = _clip_in_front(points)
+            front = clip_in_front(points)
             if len(front):
                 normalised.append(front[:, :2] / front[:, 2:])
         if not normalised:

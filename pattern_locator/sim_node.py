@@ -25,14 +25,11 @@ its power-up, and someone subscribes to the images (``wait_for_camera``).
 import math
 import os
 from pathlib import Path
-import sys
 import tempfile
 import time
 from typing import Optional
 
 from geometry_msgs.msg import PointStamped, PoseStamped
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -42,7 +39,7 @@ from .geometry import Pose
 from .head import HeadGeometry
 from .image_codec import fill_camera_info, fill_msg
 from .ros_helpers import (declare_integer, declare_number, declare_value, fill_pose,
-                          parameter_values)
+                          parameter_values, run_node)
 from .sim_world import RouteStop, SimRoute, SimScene
 from .visca_emulator import EmulatedEviD31
 from .zoom_table import ZoomTable
@@ -220,26 +217,7 @@ class SimNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    code = 0
-    node = None
-    try:
-        node = SimNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PatternLocatorError as exc:
-        print(f'sim: error: {exc}', file=sys.stderr, flush=True)
-        code = 1
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        sys.exit(code)
+    run_node(SimNode, 'sim', args)
 
 
 if __name__ == '__main__':

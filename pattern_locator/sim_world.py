@@ -30,7 +30,8 @@ from .geometry import Pose, rodrigues
 from .head import HeadGeometry
 from .paper_setup import route
 from .pattern import load_pattern_config, PatternConfig
-from .render import CardPlacement, DotCardTexture, NEAR_PLANE, render_scene, RenderOptions
+from .render import (CardPlacement, clip_in_front, DotCardTexture, NEAR_PLANE, render_scene,
+                     RenderOptions)
 
 ROUTE_MODES = ('stops', 'drive')
 PAPER_FLOOR, PAPER_ROOM = 1, 3
@@ -249,17 +250,6 @@ def _distortion_margin(width: int, height: int, K: bytes, D: bytes, model: str) 
     return float(np.max(np.linalg.norm(camera.undistort_pixels(pixels) - pixels, axis=1)))
 
 
-def _clip_in_front(points: np.ndarray) -> np.ndarray:
-    """Clip a closed 3D polygon (camera frame) to z >= NEAR_PLANE, as the renderer does."""
-    out = []
-    for a, b in zip(points, np.roll(points, -1, axis=0)):
-        if a[2] >= NEAR_PLANE:
-            out.append(a)
-        if (a[2] >= NEAR_PLANE) != (b[2] >= NEAR_PLANE):
-            out.append(a + (NEAR_PLANE - a[2]) / (b[2] - a[2]) * (b - a))
-    return np.array(out).reshape(-1, 3)
-
-
 def _overlap(a: Tuple[int, int, int, int], b: Tuple[int, int, int, int]) -> bool:
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
@@ -401,7 +391,7 @@ class SimScene:
         """
         corners = np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0],
                             [-half, -half, 0.0]])
-        front = _clip_in_front(T_camera_card.apply(corners))
+        front = clip_in_front(T_camera_card.apply(corners))
         if len(front) < 3:
             return None
         ideal = (front[:, :2] / front[:, 2:]) @ camera.K[:2, :2].T + camera.K[:2, 2]

@@ -39,7 +39,7 @@ import threading
 from typing import Deque, List, Optional, Sequence, Tuple
 
 from .errors import ConfigError
-from .head import EVI_D31_PAN_LIMITS_RAD, EVI_D31_TILT_LIMITS_RAD
+from .head import EVI_D31_PAN_LIMITS_RAD, EVI_D31_TILT_LIMITS_RAD, limit_pair
 from .visca import (PAN_MAX_DEG_S, PAN_SPEED_MAX, TILT_MAX_DEG_S, TILT_SPEED_MAX, ZOOM_TELE,
                     ZOOM_WIDE)
 
@@ -134,16 +134,6 @@ def _positive(name: str, value, allow_zero: bool = False) -> float:
         raise ConfigError(f'tracking: {name} must be {">=" if allow_zero else ">"} 0, '
                           f'got {value!r}')
     return value
-
-
-def _limits(name: str, value) -> Tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ConfigError(f'tracking: {name} must be (min, max) in radians, got {value!r}')
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise ConfigError(f'tracking: {name} must be finite with min < max, got {value!r}')
-    return lo, hi
 
 
 def _step_range(axis: str, min_speed: float, max_speed: float, step: float,
@@ -243,8 +233,8 @@ class TrackingParams:
         if not 0.0 < self.zoom_band < 1.0:
             raise ConfigError(f'tracking: zoom_band must be between 0 and 1 (relative), got '
                               f'{self.zoom_band!r}')
-        put('pan_limits_rad', _limits('pan_limits_rad', self.pan_limits_rad))
-        put('tilt_limits_rad', _limits('tilt_limits_rad', self.tilt_limits_rad))
+        put('pan_limits_rad', limit_pair(self.pan_limits_rad, 'pan_limits_rad', 'tracking'))
+        put('tilt_limits_rad', limit_pair(self.tilt_limits_rad, 'tilt_limits_rad', 'tracking'))
         _step_range('pan', self.min_pan_speed, self.max_pan_speed, PAN_STEP_RAD_S,
                     PAN_MAX_STEPS)
         _step_range('tilt', self.min_tilt_speed, self.max_tilt_speed, TILT_STEP_RAD_S,

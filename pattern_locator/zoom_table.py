@@ -37,7 +37,7 @@ import yaml
 
 from .camera import CameraModel
 from .errors import CameraError, ConfigError
-from .resources import config_path
+from .resources import config_path, read_yaml
 
 ZOOM_MIN, ZOOM_MAX = 0, 0x3FF
 TABLE_FILE = 'evi_d31_zoom.yaml'
@@ -116,19 +116,7 @@ class ZoomTable:
     def load(path: Optional[Union[str, Path]] = None) -> 'ZoomTable':
         """Load a zoom table (default: the shipped ``config/evi_d31_zoom.yaml``)."""
         path = Path(path) if path is not None else config_path(TABLE_FILE)
-        try:
-            with open(path, encoding='utf-8') as stream:
-                data = yaml.safe_load(stream)
-        except OSError as exc:
-            raise ConfigError(f'{path}: cannot read the zoom table ({exc.strerror or exc})'
-                              ) from None
-        except UnicodeDecodeError:
-            raise ConfigError(f'{path}: the zoom table is not UTF-8 text') from None
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, 'problem_mark', None)
-            where = f' at line {mark.line + 1}' if mark is not None else ''
-            raise ConfigError(f'{path}: malformed YAML{where}') from None
-        return ZoomTable.from_dict(data, str(path))
+        return ZoomTable.from_dict(read_yaml(path, 'the zoom table'), str(path))
 
     @staticmethod
     def from_dict(data: Any, source: str = 'zoom table') -> 'ZoomTable':

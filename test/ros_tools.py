@@ -1,10 +1,42 @@
-"""Shared plumbing of the tests that run nodes as real processes over DDS."""
+"""Shared plumbing of the tests: waiting on conditions, a client node over DDS."""
 
+from contextlib import contextmanager
 import time
+from typing import Iterator, Tuple
 
 from pattern_locator.node_process import locator_process
 
-__all__ = ['locator_process', 'spin_until']
+__all__ = ['client_node', 'locator_process', 'spin_until', 'wait_until']
+
+
+def wait_until(condition, timeout: float = 3.0, step: float = 0.01) -> bool:
+    """Poll ``condition`` until it holds or ``timeout`` seconds pass; return whether it did."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(step)
+    return condition()
+
+
+@contextmanager
+def client_node(name: str) -> Iterator[Tuple[object, object]]:
+    """Yield (node, executor) in a ROS context of their own; shut all down afterwards."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
 
 
 def spin_until(executor, condition, timeout: float) -> bool:

@@ -20,12 +20,9 @@ from pattern_locator.errors import ConfigError
 from pattern_locator.geometry import rotation_from_quaternion
 from pattern_locator.paper_setup import route
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
-from ros_tools import locator_process, spin_until
+from ros_tools import client_node, locator_process, spin_until
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -174,15 +171,8 @@ def test_play_refuses_what_it_cannot_play(tmp_path):
 @pytest.fixture
 def client():
     """Yield (node, executor) in a context of its own; shut down afterwards."""
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('bags_test_client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield node, executor
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
+    with client_node('bags_test_client') as pair:
+        yield pair
 
 
 def test_play_any_topics_from_a_sqlite3_bag(tmp_path, client):

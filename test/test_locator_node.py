@@ -15,10 +15,7 @@ import numpy as np
 from pattern_locator.camera import CameraModel
 from pattern_locator.image_codec import fill_camera_info, fill_msg
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from ros_tools import locator_process, spin_until
+from ros_tools import client_node, locator_process, spin_until
 from scene_tools import base_pose, CAMERA, view
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import UInt16MultiArray
@@ -37,11 +34,11 @@ def locator(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def graph(locator):
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('locator_test_client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    with client_node('locator_test_client') as (node, executor):
+        yield from _graph(node, executor)
+
+
+def _graph(node, executor):
     received = {'pose': [], 'ids': [], 'cov': []}
     node.create_subscription(PoseStamped, '/robot_location',
                              lambda m: received['pose'].append(m), 10)
@@ -52,9 +49,6 @@ def graph(locator):
     publishers = {'image': node.create_publisher(Image, '/camera/image_raw', 10),
                   'info': node.create_publisher(CameraInfo, '/camera/camera_info', 10)}
     yield node, executor, publishers, received
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
 
 
 def info_msg(camera: CameraModel, width=None) -> CameraInfo:

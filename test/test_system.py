@@ -19,26 +19,13 @@ from pattern_locator.node_process import node_process
 from pattern_locator.sim_world import RouteStop, SimRoute
 from pattern_locator.visca_emulator import EmulatedEviD31
 import pytest
-from ros_tools import spin_until
+from ros_tools import client_node, spin_until
 
 
 @pytest.fixture
 def ros_node():
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-
-    context = Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('system_test', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
-        yield node, executor
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+    with client_node('system_test') as pair:
+        yield pair
 
 
 def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, ros_node):

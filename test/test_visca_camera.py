@@ -11,18 +11,9 @@ from pattern_locator.visca_emulator import EmulatedEviD31
 from pattern_locator.visca_transport import (ViscaCancelled, ViscaConnectionError,
                                              ViscaNotExecutable, ViscaSyntaxError, ViscaTimeout)
 import pytest
+from ros_tools import wait_until
 
 INIT_S = 0.15
-
-
-def wait_until(condition, timeout=3.0, step=0.01):
-    """Poll ``condition`` until it holds; return whether it did."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(step)
-    return condition()
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ from pattern_locator.visca_transport import (CommandResult, ViscaBufferFull, Vis
                                              ViscaMessageLengthError, ViscaNotExecutable,
                                              ViscaSyntaxError, ViscaTimeout, ViscaTransport)
 import pytest
+from ros_tools import wait_until
 import serial
 
 ADDR = 1
@@ -20,16 +21,6 @@ POSITION_ANSWER = v.answer(ADDR, v.pan_tilt_position_payload(-880, 300))
 DRIVE = v.pan_tilt_drive(ADDR, 5, 5, v.PAN_LEFT, v.TILT_STOP)
 HOME = v.pan_tilt_home(ADDR)
 POSITION_INQ = v.inquiry_pan_tilt_position(ADDR)
-
-
-def wait_until(condition, timeout=3.0, step=0.005):
-    """Poll ``condition`` until it holds; return whether it did."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(step)
-    return condition()
 
 
 def camera_reply(packet):

@@ -33,8 +33,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -48,7 +46,7 @@ from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .localizer import FrameResult, RobotLocalizer
 from .overlay import draw_overlay
 from .pattern import load_pattern_config
-from .ros_helpers import fill_pose, stamp_seconds
+from .ros_helpers import fill_pose, run_node, stamp_seconds
 
 THROTTLE_S = 5.0
 
@@ -341,22 +339,7 @@ class LocatorNode(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = LocatorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except PatternLocatorError as exc:
-        print(f'locator: error: {exc}')
-    finally:
-        if node is not None:
-            node.stop()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(LocatorNode, 'locator', args)
 
 
 if __name__ == '__main__':

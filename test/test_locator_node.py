@@ -8,6 +8,8 @@ covariance, ignore malformed input, and shut down cleanly on Ctrl-C.
 
 import math
 import signal
+import subprocess
+import sys
 import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
@@ -184,3 +186,13 @@ def test_ctrl_c_is_a_clean_shutdown(locator, graph):
     assert 'Traceback' not in output, output
     # The malformed input of the first test was reported, not ignored.
     assert 'weird16' in output and 'camera_info is for 800x480' in output
+
+
+def test_a_bad_configuration_exits_1_with_one_line_on_stderr(tmp_path):
+    missing = tmp_path / 'no_such_building.yaml'
+    proc = subprocess.run([sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
+                           '-p', f'building_map:={missing}'],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f'locator: error: {missing}: cannot read the building map (No such file or directory)')

@@ -50,7 +50,8 @@ from .zoom_table import ZoomTable
 PARAMETERS = (
     'port', 'baud', 'address', 'rate_hz', 'startup_timeout_s', 'tracking', 'gain',
     'dead_band_deg', 'max_pan_speed_deg_s', 'max_tilt_speed_deg_s', 'pan_limits_deg',
-    'tilt_limits_deg', 'target_timeout_s', 'search', 'search_after_s', 'search_speed_deg_s',
+    'tilt_limits_deg', 'target_timeout_s', 'search', 'search_ahead_first', 'search_after_s',
+    'search_speed_deg_s',
     'search_tilt_levels_deg', 'zoom_control', 'target_size_px', 'zoom_table', 'zoom_every',
     'pan_joint', 'tilt_joint', 'zoom_joint', 'camera_frame')
 
@@ -107,6 +108,8 @@ class CameraDriverNode(Node):
         declare_number(self, 'target_timeout_s', 0.5, 'stop the head when no target image is '
                        'newer than this', 0.05, 10.0)
         declare_value(self, 'search', True, 'sweep to search when no card was seen')
+        declare_value(self, 'search_ahead_first', True, 'a head turned aside sweeps back '
+                      'through straight ahead first (where the robot goes)')
         declare_number(self, 'search_after_s', 3.0, 'start the sweep after this long without '
                        'a target', 0.5, 600.0)
         declare_number(self, 'search_speed_deg_s', 20.0, 'pan speed of the sweep', 3.4, 80.0)
@@ -138,7 +141,8 @@ class CameraDriverNode(Node):
             max_tilt_speed=math.radians(p['max_tilt_speed_deg_s']),
             control_period_s=1.0 / p['rate_hz'], pan_limits_rad=limits('pan_limits_deg'),
             tilt_limits_rad=limits('tilt_limits_deg'), target_timeout_s=p['target_timeout_s'],
-            search_enabled=p['search'], search_after_s=p['search_after_s'],
+            search_enabled=p['search'], search_ahead_first=p['search_ahead_first'],
+            search_after_s=p['search_after_s'],
             search_pan_speed=math.radians(p['search_speed_deg_s']),
             search_tilt_levels_rad=tuple(math.radians(float(v))
                                          for v in p['search_tilt_levels_deg']),

@@ -71,6 +71,8 @@ RATE_MIN_AIMS = 3
 RATE_MIN_SPAN_S = 0.15
 # A zoom stops when the size is back within this fraction of the zoom band.
 ZOOM_STOP_FRACTION = 1.0 / 3.0
+# A head turned further than this to a side searches back through straight ahead first.
+AHEAD_BAND_RAD = math.radians(15.0)
 # The search sweep turns back this far inside the pan limits.
 SEARCH_MARGIN_RAD = math.radians(2.0)
 
@@ -172,7 +174,10 @@ class TrackingParams:
     * ``target_timeout_s``: no target image newer than this (by its stamp)
       -> the head stops ('hold'); ``search_after_s`` -> a search sweep at
       ``search_pan_speed`` across the pan travel, one pass at each of
-      ``search_tilt_levels_rad`` in turn (if ``search_enabled``).
+      ``search_tilt_levels_rad`` in turn (if ``search_enabled``). With
+      ``search_ahead_first`` a head turned more than ``AHEAD_BAND_RAD`` to a
+      side sweeps back through straight ahead first: after the robot moved
+      on, the next card is likelier ahead of it than where the last one was.
     * ``head_timeout_s``: no head reading newer than this -> 'idle', stop.
     * ``rate_window_s``: the span of recent aims fitted for the card's
       angular rate (0 = no rate feed-forward). Rates under half the slowest
@@ -198,6 +203,7 @@ class TrackingParams:
     head_timeout_s: float = 0.5
     rate_window_s: float = 0.5
     search_enabled: bool = True
+    search_ahead_first: bool = True
     search_after_s: float = 3.0
     search_pan_speed: float = math.radians(20.0)
     search_tilt_levels_rad: Tuple[float, ...] = (0.0, math.radians(15.0))
@@ -217,7 +223,7 @@ class TrackingParams:
             put(name, _positive(name, getattr(self, name)))
         for name in ('dead_band_rad', 'resume_band_rad', 'rate_window_s'):
             put(name, _positive(name, getattr(self, name), allow_zero=True))
-        for name in ('search_enabled', 'zoom_enabled'):
+        for name in ('search_enabled', 'search_ahead_first', 'zoom_enabled'):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f'tracking: {name} must be true or false, got '
                                   f'{getattr(self, name)!r}')
@@ -595,9 +601,12 @@ class TrackingController:
         return ZOOM_WIDE_DIR
 
     def _start_search(self) -> None:
-        """Sweep first towards where the card was last seen (left when unknown)."""
+        """Sweep first back through straight ahead, else where the card was last seen."""
         towards = 1.0
-        if self._aims:
+        pan = self._readings[-1][0] if self._readings else 0.0
+        if self._params.search_ahead_first and abs(pan) > AHEAD_BAND_RAD:
+            towards = -pan
+        elif self._aims:
             # Where it was going if it was moving, else where it was.
             towards = self._rate[0] or (self._aims[-1][1] - self._readings[-1][0])
         self._search_dir = -1.0 if towards < 0.0 else 1.0

@@ -396,6 +396,19 @@ def test_search_sweeps_after_no_target_and_stops_when_one_arrives():
     assert command.mode == MODE_TRACK
 
 
+@pytest.mark.parametrize('ahead_first, direction', [(True, 1), (False, -1)])
+def test_a_head_turned_aside_searches_back_through_straight_ahead_first(ahead_first, direction):
+    ctrl = controller(search_ahead_first=ahead_first)
+    for k in range(21):
+        ctrl.on_head_state(k / 20.0, -60 * DEG, 0.0)
+    ctrl.on_target(1.0, -10 * DEG, 0.0)               # last seen further right
+    for k in range(21, 81):
+        ctrl.on_head_state(k / 20.0, -60 * DEG, 0.0)
+    command = ctrl.update(4.05)
+    assert command.mode == MODE_SEARCH
+    assert command.pan_steps == 6 * direction         # left = back towards ahead
+
+
 def test_search_turns_at_the_travel_ends_and_changes_tilt_level():
     ctrl = controller(search_tilt_levels_rad=(0.0, 15 * DEG))
     assert ctrl.update(0.0).mode == MODE_IDLE         # starts the clock

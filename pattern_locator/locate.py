@@ -15,7 +15,7 @@ from .detector import CardDetection, Detector, DetectorParams
 from .errors import ConfigError, EstimationError
 from .geometry import Pose
 from .pattern import PatternConfig
-from .pose_exact import estimate_exact, paper_angles, PosePrior
+from .pose_exact import covariance_of_pose, estimate_exact, paper_angles, PosePrior
 
 ESTIMATORS = ('exact', 'paper')
 
@@ -26,7 +26,7 @@ class LocatedCard:
 
     detection: CardDetection
     T_camera_pattern: Optional[Pose]
-    covariance: Optional[np.ndarray]       # 6x6, exact estimator only
+    covariance: Optional[np.ndarray]       # 6x6 (first-order at the pose for 'paper')
     reprojection_rms_px: Optional[float]
     ambiguity: Optional[float]             # exact estimator only
     psi_deg: Optional[float]
@@ -89,7 +89,9 @@ class CardLocator:
     def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
         from .pose_paper import estimate_paper
         est = estimate_paper(card.points_px, camera, self.config, min_tilt_deg=self.min_tilt_deg)
-        return LocatedCard(card, est.T_camera_pattern, None, est.reprojection_rms_px, None,
+        covariance = covariance_of_pose(est.T_camera_pattern, card.points_px, camera,
+                                        self.config, self.pixel_sigma)
+        return LocatedCard(card, est.T_camera_pattern, covariance, est.reprojection_rms_px, None,
                            est.psi_deg, est.phi_deg, est.theta_deg, est.distance_m, 'paper')
 
 

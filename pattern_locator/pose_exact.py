@@ -161,6 +161,27 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     )
 
 
+def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,
+                       config: PatternConfig, pixel_sigma: Optional[float] = None) -> np.ndarray:
+    """
+    Return the first-order 6x6 covariance of any pose estimate from its dots.
+
+    For an estimator other than this module's (the paper's): the pixel noise
+    is taken from the dots' reprojection residuals at that pose, so a pose
+    that fits its dots worse gets a larger covariance. It does not know the
+    estimator's own inefficiency; the exact estimator reaches this bound.
+    """
+    points_px = np.asarray(points_px, dtype=float)
+    seen = ~np.isnan(points_px).any(axis=1)
+    obj = _model_points(config)[seen]
+    observed = camera.undistort_pixels(points_px[seen])
+    residual = np.linalg.norm(_pixels(T_camera_pattern.apply(obj), camera.K) - observed, axis=1)
+    n = len(obj)
+    sigma = max(math.sqrt(float(np.sum(residual ** 2)) / max(2 * n - 6, 1)),
+                pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
+    return pose_covariance(T_camera_pattern, obj, camera.K, sigma)
+
+
 def pose_covariance(T_camera_pattern: Pose, object_points: np.ndarray, K: np.ndarray,
                     sigma_px: float) -> np.ndarray:
     """

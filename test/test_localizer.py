@@ -47,6 +47,21 @@ def test_base_pose_in_the_room_frame(x, y, yaw, card):
     assert abs(fix.target_pan) < math.radians(3) and abs(fix.target_tilt) < math.radians(3)
 
 
+def test_the_papers_estimator_gives_a_fix_with_a_covariance():
+    # The paper's estimator has no covariance of its own: the first-order one
+    # at its pose lets the node publish it like the exact one.
+    T_room_base = base_pose(6.0, 1.5, 60.0)
+    pan, tilt = aim(T_room_base, BUILDING.card((1, 3, 3)).T_room_card.t)
+    image, _ = view(1, 3, T_room_base, pan, tilt, seed=3)
+    paper = localizer(estimator='paper').process(image, CAMERA, pan, tilt).fix
+    assert paper is not None
+    assert np.linalg.norm(paper.T_frame_base.t - T_room_base.t) < 0.05
+    cov = paper.covariance
+    assert cov.shape == (6, 6) and np.all(np.linalg.eigvalsh(cov) > 0)
+    err = paper.T_frame_base.t - T_room_base.t
+    assert err @ np.linalg.solve(cov[:3, :3], err) < 30.0
+
+
 def test_building_frame_output():
     T_room_base = base_pose(4.0, 2.5, 180.0)
     pan, tilt = aim(T_room_base, BUILDING.card((1, 3, 1)).T_room_card.t)

@@ -19,7 +19,9 @@ from pattern_locator.node_process import node_process
 from pattern_locator.sim_world import RouteStop, SimRoute
 from pattern_locator.visca_emulator import EmulatedEviD31
 import pytest
-from ros_tools import client_node, spin_until
+from ros_tools import client_node, locator_process, spin_until
+from scene_tools import CAMERA, view
+from test_locator_node import image_msg, info_msg, send, TILT_DEG, TRUTH
 
 
 @pytest.fixture
@@ -191,3 +193,33 @@ def test_fake_camera_command_prints_its_port_and_answers_visca(tmp_path):
     finally:
         proc.terminate()
         assert proc.wait(timeout=10) == 0
+
+
+def test_the_papers_estimator_runs_in_the_locator_node(tmp_path):
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+    from sensor_msgs.msg import CameraInfo, Image
+    from std_msgs.msg import UInt16MultiArray
+
+    parameters = ['use_joint_states:=false', f'fixed_tilt_deg:={TILT_DEG}', 'estimator:=paper']
+    with locator_process(tmp_path / 'locator.log', parameters) as proc, \
+            client_node('paper_estimator_test') as (node, executor):
+        received = {'pose': [], 'ids': [], 'cov': []}
+        for key, kind, topic in (('pose', PoseStamped, '/robot_location'),
+                                 ('ids', UInt16MultiArray, '/robot_location/ids'),
+                                 ('cov', PoseWithCovarianceStamped,
+                                  '/robot_location/with_covariance')):
+            node.create_subscription(kind, topic, received[key].append, 10)
+        publishers = {'image': node.create_publisher(Image, '/camera/image_raw', 10),
+                      'info': node.create_publisher(CameraInfo, '/camera/camera_info', 10)}
+        assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0,
+                          20.0), proc.log.read_text()
+        image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+        pose = send((node, executor, publishers, received), image_msg(image, 100),
+                    info_msg(CAMERA), 100)
+        assert pose is not None, proc.log.read_text()
+        p = pose.pose.position
+        assert np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]) < 0.05
+        assert spin_until(executor, lambda: received['cov'], 3.0)
+        cov = np.array(received['cov'][-1].pose.covariance).reshape(6, 6)
+        assert np.all(np.linalg.eigvalsh((cov + cov.T) / 2) > 0)
+    assert 'unexpected' not in proc.log.read_text()

@@ -51,6 +51,13 @@ from .ros_helpers import fill_pose, run_node, stamp_seconds
 THROTTLE_S = 5.0
 
 
+CAMERA_INFO_HISTORY = 60
+
+
+def _stamp_key(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
 class LocatorNode(Node):
     """Thin ROS shell around :class:`localizer.RobotLocalizer`."""
 
@@ -81,6 +88,10 @@ class LocatorNode(Node):
             f'{k}={v}' for k, v in sorted(p.items())))
 
         self.camera: Optional[CameraModel] = None
+        # Recent intrinsics by stamp: a zooming camera's image is matched with
+        # the camera_info of its own stamp, not with whatever came last.
+        self._cameras_by_stamp: 'collections.OrderedDict[int, CameraModel]' = \
+            collections.OrderedDict()
         self._camera_problem = 'no camera_info received yet'
         self._latest: Optional[Image] = None
         self._wake = threading.Condition()
@@ -177,6 +188,9 @@ class LocatorNode(Node):
         try:
             self.camera = camera_from_info(msg)
             self._camera_problem = ''
+            self._cameras_by_stamp[_stamp_key(msg.header.stamp)] = self.camera
+            while len(self._cameras_by_stamp) > CAMERA_INFO_HISTORY:
+                self._cameras_by_stamp.popitem(last=False)
         except PatternLocatorError as exc:
             self.camera = None
             self._camera_problem = f'bad camera_info: {exc}'
@@ -222,7 +236,7 @@ class LocatorNode(Node):
     def _process(self, msg: Image) -> None:
         with self._stats_lock:
             self.stats['processed'] += 1
-        camera = self.camera
+        camera = self._cameras_by_stamp.get(_stamp_key(msg.header.stamp), self.camera)
         if camera is None:
             self._problem(self._camera_problem)
             return

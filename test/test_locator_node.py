@@ -178,6 +178,35 @@ def test_debug_image_while_someone_looks(locator, graph):
     assert bytes(shown.data) != image.tobytes()       # something was drawn on it
 
 
+def test_each_image_uses_the_camera_info_of_its_own_stamp(locator, graph):
+    # A zooming camera: the camera_info of the next frame (other intrinsics)
+    # arrives before this frame is processed; this frame must keep its own.
+    node, executor, publishers, received = graph
+    assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0, 20.0)
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    own = info_msg(CAMERA)
+    own.header.stamp.sec = 400
+    zoomed = info_msg(CAMERA)
+    zoomed.header.stamp.sec = 401
+    zoomed.k = [2.0 * v if i in (0, 4) else v for i, v in enumerate(own.k)]
+    zoomed.p = [2.0 * v if i in (0, 5) else v for i, v in enumerate(own.p)]
+
+    def got():
+        return any(m.header.stamp.sec == 400 for m in received['pose'])
+
+    deadline = time.monotonic() + 8.0
+    while not got() and time.monotonic() < deadline:
+        publishers['info'].publish(own)
+        publishers['info'].publish(zoomed)
+        spin_until(executor, lambda: False, 0.05)
+        publishers['image'].publish(image_msg(image, 400))
+        spin_until(executor, got, 1.0)
+    pose = [m for m in received['pose'] if m.header.stamp.sec == 400]
+    assert pose, locator.log.read_text()
+    p = pose[0].pose.position
+    assert np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]) < 0.04
+
+
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):
     locator.send_signal(signal.SIGINT)
     locator.wait(timeout=15)

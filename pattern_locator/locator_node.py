@@ -46,12 +46,17 @@ from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .localizer import FrameResult, RobotLocalizer
 from .overlay import draw_overlay
 from .pattern import load_pattern_config
-from .ros_helpers import fill_pose, run_node, stamp_seconds
+from .ros_helpers import fill_pose, parameter_values, run_node, stamp_seconds
 
 THROTTLE_S = 5.0
 
 
 CAMERA_INFO_HISTORY = 60
+PARAMETERS = (
+    'pattern_config', 'building_map', 'estimator', 'output_frame', 'fusion', 'base_frame',
+    'min_tilt_deg', 'max_reprojection_px', 'use_joint_states', 'fixed_pan_deg', 'fixed_tilt_deg',
+    'joint_state_max_age_s', 'joint_state_wait_s', 'opencv_threads', 'head.base_to_pan_xyz',
+    'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz', 'head.mount_pitch_deg')
 
 
 def _stamp_key(stamp) -> int:
@@ -165,13 +170,7 @@ class LocatorNode(Node):
             self.declare_parameter(name, value, ParameterDescriptor(description=what))
 
     def _params(self) -> dict:
-        return {name: self.get_parameter(name).value for name in (
-            'pattern_config', 'building_map', 'estimator', 'output_frame', 'fusion',
-            'base_frame', 'min_tilt_deg', 'max_reprojection_px', 'use_joint_states',
-            'fixed_pan_deg', 'fixed_tilt_deg', 'joint_state_max_age_s', 'joint_state_wait_s',
-            'opencv_threads',
-            'head.base_to_pan_xyz', 'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz',
-            'head.mount_pitch_deg')}
+        return parameter_values(self, PARAMETERS)
 
     # Callbacks (executor thread: store only) ---------------------------------------
 

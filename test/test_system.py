@@ -223,3 +223,18 @@ def test_the_papers_estimator_runs_in_the_locator_node(tmp_path):
         cov = np.array(received['cov'][-1].pose.covariance).reshape(6, 6)
         assert np.all(np.linalg.eigvalsh((cov + cov.T) / 2) > 0)
     assert 'unexpected' not in proc.log.read_text()
+
+
+@pytest.mark.parametrize('config, node_module', [('camera_driver.yaml', 'camera_driver_node'),
+                                                 ('locator.yaml', 'locator_node'),
+                                                 ('sim.yaml', 'sim_node')])
+def test_shipped_parameter_files_name_only_declared_parameters(config, node_module):
+    import importlib
+    import yaml
+    path = Path(__file__).resolve().parent.parent / 'config' / config
+    data = yaml.safe_load(path.read_text())
+    (node_name, section), = data.items()
+    names = set(section['ros__parameters'])
+    module = importlib.import_module(f'pattern_locator.{node_module}')
+    declared = set(module.PARAMETERS)
+    assert names == declared, (names ^ declared)

@@ -150,7 +150,7 @@ def test_detect_paper_estimator(scene, capsys):
     assert status == 0 and err == ''
     (card,) = json_lines(out)[0]['patterns']
     assert card['estimator'] == 'paper' and card['code'] == str(CODE)
-    assert card['covariance'] is None and card['ambiguity'] is None
+    assert np.array(card['covariance']).shape == (6, 6) and card['ambiguity'] is None
     _, phi, theta, distance = paper_angles(poses['one'], CAMERA, CFG)
     assert card['phi_deg'] == pytest.approx(phi, abs=1.0)
     assert card['distance_m'] == pytest.approx(distance, rel=0.01)

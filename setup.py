@@ -24,9 +24,9 @@ setup(
     entry_points={
         'console_scripts': [
             'pattern-locator = pattern_locator.cli:main',
-            'locator = pattern_locator.locator_node:main',
-            'camera_driver = pattern_locator.camera_driver_node:main',
-            'sim = pattern_locator.sim_node:main',
+            'locator = pattern_locator.nodes.locator_node:main',
+            'camera_driver = pattern_locator.nodes.camera_driver_node:main',
+            'sim = pattern_locator.nodes.sim_node:main',
         ],
     },
 )

@@ -16,9 +16,9 @@ from typing import List, Optional, Sequence
 import cv2
 import numpy as np
 
+from .card.pattern import load_pattern_config
 from .errors import ConfigError, PatternLocatorError
-from .locate import CardLocator, ESTIMATORS, LocatedCard
-from .pattern import load_pattern_config
+from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
 
@@ -137,11 +137,11 @@ def _parser() -> argparse.ArgumentParser:
 # make-pattern ----------------------------------------------------------------
 
 def _make_pattern(args: argparse.Namespace) -> int:
-    from .pattern import Ids
-    from .printable import write_card
+    from .card.pattern import Ids
+    from .card.printable import write_card
     cfg = load_pattern_config(args.pattern_config)
     if args.building:
-        from .building import load_building, write_building_cards
+        from .localization.building import load_building, write_building_cards
         building = load_building(args.building, cfg)
         written = write_building_cards(building, cfg, args.output, paper=args.paper,
                                        fmt=args.format, dpi=args.dpi)
@@ -166,7 +166,7 @@ def _make_pattern(args: argparse.Namespace) -> int:
 # detect ------------------------------------------------------------------------
 
 def _detect(args: argparse.Namespace) -> int:
-    from .camera import load_camera
+    from .vision.camera import load_camera
     cfg = load_pattern_config(args.pattern_config)
     camera = load_camera(args.camera)
     locator = CardLocator(cfg, estimator=args.estimator, min_tilt_deg=args.min_tilt)
@@ -276,37 +276,37 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 
 def _bench(args: argparse.Namespace) -> int:
     if args.tracking:
-        from .bench_tracking import run_tracking_bench
+        from .evaluation.bench_tracking import run_tracking_bench
         return run_tracking_bench()
     if args.node:
-        from .bench_node import run_node_bench
+        from .evaluation.bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
-    from .bench import run_bench
+    from .evaluation.bench import run_bench
     return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
 
 
 def _bag_record(args: argparse.Namespace) -> int:
-    from .bags import record_sim_main
+    from .nodes.bags import record_sim_main
     return record_sim_main(args.out, n_stops=args.stops, rate_hz=args.rate, seed=args.seed)
 
 
 def _bag_play(args: argparse.Namespace) -> int:
-    from .bags import play_main
+    from .nodes.bags import play_main
     return play_main(args.bag, rate=args.rate)
 
 
 def _fake_camera(args: argparse.Namespace) -> int:
-    from .visca_emulator import run_fake_camera
+    from .visca.emulator import run_fake_camera
     return run_fake_camera(args.link, args.init_s)
 
 
 def _demo(args: argparse.Namespace) -> int:
     if args.core:
-        from .demo import run_demo
+        from .evaluation.demo import run_demo
         return run_demo(estimator=args.estimator, seed=args.seed, output_dir=args.output_dir)
     if not 1 <= args.stops <= 30:
         raise ConfigError(f'demo: --stops must be 1..30, got {args.stops}')
-    from .demo_system import run_system_demo
+    from .evaluation.demo_system import run_system_demo
     return run_system_demo(estimator=args.estimator, output_dir=args.output_dir,
                            n_stops=args.stops, dwell_s=args.dwell, zoom_control=args.zoom)
 

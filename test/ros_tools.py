@@ -4,7 +4,7 @@ from contextlib import contextmanager
 import time
 from typing import Iterator, Tuple
 
-from pattern_locator.node_process import locator_process
+from pattern_locator.nodes.node_process import locator_process
 
 __all__ = ['client_node', 'locator_process', 'spin_until', 'wait_until']
 

@@ -1,12 +1,12 @@
 """Rendered views of the shipped building for the localizer and node tests."""
 
 import numpy as np
-from pattern_locator.building import load_building
-from pattern_locator.camera import CameraModel
-from pattern_locator.geometry import Pose, rodrigues
-from pattern_locator.head import HeadGeometry
-from pattern_locator.pattern import load_pattern_config
-from pattern_locator.render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from pattern_locator.card.pattern import load_pattern_config
+from pattern_locator.localization.building import load_building
+from pattern_locator.localization.head import HeadGeometry
+from pattern_locator.sim.render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import Pose, rodrigues
 
 PATTERN = load_pattern_config()
 BUILDING = load_building(None, PATTERN)

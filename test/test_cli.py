@@ -9,12 +9,12 @@ import sys
 
 import cv2
 import numpy as np
-from pattern_locator.camera import CameraModel, save_camera
+from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.cli import main
-from pattern_locator.pattern import PatternConfig
-from pattern_locator.pose_exact import paper_angles
-from pattern_locator.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
-                                    render_scene, RenderOptions)
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
+                                        render_scene, RenderOptions)
+from pattern_locator.vision.camera import CameraModel, save_camera
+from pattern_locator.vision.pose_exact import paper_angles
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent

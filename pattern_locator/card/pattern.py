@@ -19,8 +19,8 @@ from typing import Dict, Iterator, List, Optional, Tuple, Union
 
 import numpy as np
 
-from .errors import CodeError, ConfigError
-from .resources import config_path, read_yaml
+from ..errors import CodeError, ConfigError
+from ..resources import config_path, read_yaml
 
 COLOURS = 'KRGB'
 RING_POINTS = 8

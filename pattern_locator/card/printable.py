@@ -37,8 +37,8 @@ import zlib
 import cv2
 import numpy as np
 
-from .errors import ConfigError, PrintError
 from .pattern import Ids, PatternConfig
+from ..errors import ConfigError, PrintError
 
 PAPER_SIZES_MM = {
     'a3': (297.0, 420.0),

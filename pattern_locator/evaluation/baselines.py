@@ -40,9 +40,9 @@ import weakref
 import cv2
 import numpy as np
 
-from .camera import CameraModel
-from .errors import ImageError
-from .geometry import Pose
+from ..errors import ImageError
+from ..vision.camera import CameraModel
+from ..vision.geometry import Pose
 
 KINDS = ('apriltag', 'aruco')
 

@@ -27,16 +27,16 @@ import cv2
 import numpy as np
 
 from .baselines import make_locator, square_pose_solutions, tag_card_bitmap
-from .camera import CameraModel
 from .demo import PAPER_TABLE1
-from .geometry import Pose, rodrigues, rotation_angle
-from .locate import CardLocator
-from .paper_setup import paper_camera
-from .pattern import Ids, load_pattern_config, PatternConfig
-from .pose_exact import (ellipse_centres, estimate_exact, paper_angles, pose_covariance,
-                         PosePrior)
-from .render import (BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture,
-                     Occluder, render_scene, RenderOptions)
+from ..card.pattern import Ids, load_pattern_config, PatternConfig
+from ..sim.paper_setup import paper_camera
+from ..sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture,
+                          Occluder, render_scene, RenderOptions)
+from ..vision.camera import CameraModel
+from ..vision.geometry import Pose, rodrigues, rotation_angle
+from ..vision.locate import CardLocator
+from ..vision.pose_exact import (ellipse_centres, estimate_exact, paper_angles, pose_covariance,
+                                 PosePrior)
 
 DISTANCE_BINS = ((1.25, 2.0), (2.0, 3.0), (3.0, 4.5), (4.5, 6.0), (6.0, 8.0))
 MARKERS = ('dots', 'apriltag', 'aruco')

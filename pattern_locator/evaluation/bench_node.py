@@ -20,16 +20,16 @@ from typing import Dict, List
 import cv2
 import numpy as np
 
-from .bags import render_stop
-from .building import load_building
-from .camera import CameraModel
-from .geometry import Pose, rodrigues
-from .head import HeadGeometry
-from .image_codec import fill_camera_info, fill_msg
-from .localizer import RobotLocalizer
-from .node_process import locator_process
-from .pattern import load_pattern_config
-from .resources import config_path
+from ..card.pattern import load_pattern_config
+from ..localization.building import load_building
+from ..localization.head import HeadGeometry
+from ..localization.localizer import RobotLocalizer
+from ..nodes.bags import render_stop
+from ..nodes.image_codec import fill_camera_info, fill_msg
+from ..nodes.node_process import locator_process
+from ..resources import config_path
+from ..vision.camera import CameraModel
+from ..vision.geometry import Pose, rodrigues
 
 TILT_DEG = 15.0
 

@@ -19,7 +19,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 
 from .demo_system import Observer, run_closed_loop, stop_of
-from .sim_world import RouteStop, SimRoute
+from ..sim.world import RouteStop, SimRoute
 
 CARD_DISTANCE_M = 3.0
 START_OFF_DEG = 15.0

@@ -18,11 +18,11 @@ from typing import Dict, List, Optional, Tuple
 import cv2
 import numpy as np
 
-from .locate import CardLocator
-from .paper_setup import paper_camera, room_cards, ROOM_SIZE, route, tracking_camera_pose
-from .pattern import Ids, load_pattern_config
-from .pose_exact import paper_angles
-from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from ..card.pattern import Ids, load_pattern_config
+from ..sim.paper_setup import paper_camera, room_cards, ROOM_SIZE, route, tracking_camera_pose
+from ..sim.render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from ..vision.locate import CardLocator
+from ..vision.pose_exact import paper_angles
 
 # The paper's Table 1 (absolute errors): average, std dev, greatest.
 PAPER_TABLE1 = {

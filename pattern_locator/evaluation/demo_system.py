@@ -23,14 +23,14 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .building import BuildingMap, load_building
 from .demo import PAPER_TABLE1, plot_paths, print_results, StopResult, summary_table
-from .errors import PatternLocatorError
-from .geometry import Pose, rotation_from_quaternion
-from .head import HeadGeometry, JointStateBuffer
-from .node_process import node_process
-from .resources import config_path
-from .sim_world import SimRoute
+from ..errors import PatternLocatorError
+from ..localization.building import BuildingMap, load_building
+from ..localization.head import HeadGeometry, JointStateBuffer
+from ..nodes.node_process import node_process
+from ..resources import config_path
+from ..sim.world import SimRoute
+from ..vision.geometry import Pose, rotation_from_quaternion
 
 FLOOR, ROOM = 1, 3
 # The demo robot's camera looks up 15 deg at tilt 0: the route passes as close

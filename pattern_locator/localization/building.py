@@ -23,10 +23,10 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 import yaml
 
-from .errors import CodeError, ConfigError, PrintError
-from .geometry import Pose, rotation_from_quaternion
-from .pattern import Code, Ids, load_pattern_config, PatternConfig
-from .resources import config_path, read_yaml
+from ..card.pattern import Code, Ids, load_pattern_config, PatternConfig
+from ..errors import CodeError, ConfigError, PrintError
+from ..resources import config_path, read_yaml
+from ..vision.geometry import Pose, rotation_from_quaternion
 
 DEFAULT_FRAME = 'building'
 TOLERANCE = 1e-6          # unit quaternion / orthonormal rotation, as the file must give them
@@ -484,7 +484,7 @@ def write_building_cards(building: BuildingMap, pattern: PatternConfig,
     ConfigError when ``pattern`` is not the code layout the map was checked
     against (the printed cards would not be the mapped ones).
     """
-    from .printable import write_card       # cv2 only when printing
+    from ..card.printable import write_card       # cv2 only when printing
     fmt = str(fmt).lower().lstrip('.')
     if fmt not in CARD_FORMATS:
         raise PrintError(f'unknown card format {fmt!r}; use {", ".join(CARD_FORMATS)}')

@@ -38,8 +38,8 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .errors import ConfigError, PatternLocatorError
-from .geometry import Pose, skew
+from ..errors import ConfigError, PatternLocatorError
+from ..vision.geometry import Pose, skew
 
 # EVI-D31 travel (visca.md): pan +-100 deg, tilt +-25 deg.
 EVI_D31_PAN_LIMITS_RAD = (-math.radians(100.0), math.radians(100.0))

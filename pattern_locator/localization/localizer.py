@@ -16,14 +16,14 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from .building import BuildingMap, MappedCard
-from .camera import CameraModel
-from .detector import CardDetection
-from .errors import CodeError, ConfigError
-from .geometry import Pose, rodrigues, rotation_vector
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, up_in_camera
-from .locate import CardLocator
-from .pattern import Ids, PatternConfig
-from .pose_exact import PosePrior
+from ..card.pattern import Ids, PatternConfig
+from ..errors import CodeError, ConfigError
+from ..vision.camera import CameraModel
+from ..vision.detector import CardDetection
+from ..vision.geometry import Pose, rodrigues, rotation_vector
+from ..vision.locate import CardLocator
+from ..vision.pose_exact import PosePrior
 
 OUTPUT_FRAMES = ('room', 'building')
 FUSION_MODES = ('biggest', 'fused')

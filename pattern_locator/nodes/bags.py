@@ -18,7 +18,7 @@ needed here.
   it before returning.
 
 Regenerate the checked-in test bag with
-``python -m pattern_locator.bags test/data/paper_route`` (the directory must
+``python -m pattern_locator.nodes.bags test/data/paper_route`` (the directory must
 not exist).
 """
 
@@ -37,15 +37,15 @@ from rosbags.rosbag2 import (CompressionFormat, CompressionMode, Reader, ReaderE
                              StoragePlugin, Writer, WriterError)
 from rosbags.typesys import get_typestore, Stores
 
-from .building import load_building
-from .camera import CameraModel
-from .errors import ConfigError, PatternLocatorError
-from .geometry import Pose, quaternion_xyzw, rodrigues
-from .head import HeadGeometry
 from .image_codec import encode_image
-from .paper_setup import route
-from .pattern import load_pattern_config
-from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from ..card.pattern import load_pattern_config
+from ..errors import ConfigError, PatternLocatorError
+from ..localization.building import load_building
+from ..localization.head import HeadGeometry
+from ..sim.paper_setup import route
+from ..sim.render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from ..vision.camera import CameraModel
+from ..vision.geometry import Pose, quaternion_xyzw, rodrigues
 
 IMAGE_TOPIC = '/camera/image_raw'
 INFO_TOPIC = '/camera/camera_info'
@@ -451,7 +451,7 @@ def play_main(bag: Union[str, Path], rate: float = 1.0, **opts) -> int:
 
 if __name__ == '__main__':
     if len(sys.argv) != 2:
-        print('usage: python -m pattern_locator.bags OUT_DIR  (writes the test bag)',
+        print('usage: python -m pattern_locator.nodes.bags OUT_DIR  (writes the test bag)',
               file=sys.stderr)
         sys.exit(2)
     try:

@@ -37,15 +37,15 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, JointState
 from std_srvs.srv import Trigger
 
-from .errors import PatternLocatorError
-from .head_loop import HeadLoop, HeadReading
 from .image_codec import fill_camera_info
 from .ros_helpers import (declare_integer, declare_number, declare_value, parameter_values,
                           run_node, stamp_seconds)
-from .tracking import TrackingController, TrackingParams
-from .visca import ViscaError
-from .visca_camera import EviD31
-from .zoom_table import ZoomTable
+from ..errors import PatternLocatorError
+from ..tracking.controller import TrackingController, TrackingParams
+from ..tracking.head_loop import HeadLoop, HeadReading
+from ..visca.camera import EviD31
+from ..visca.protocol import ViscaError
+from ..visca.zoom_table import ZoomTable
 
 PARAMETERS = (
     'port', 'baud', 'address', 'rate_hz', 'startup_timeout_s', 'tracking', 'gain',

@@ -19,8 +19,8 @@ from typing import Any, Dict, Tuple
 import cv2
 import numpy as np
 
-from .camera import CameraModel
-from .errors import ImageError
+from ..errors import ImageError
+from ..vision.camera import CameraModel
 
 # Bytes per pixel of each encoding the decoder reads (the bytes in one row of
 # ``width`` pixels is ``width * bpp``; YUV 4:2:2 is 2 bytes per pixel on average).

@@ -38,15 +38,15 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import MultiArrayDimension, UInt16MultiArray
 
-from .building import load_building
-from .camera import CameraModel
-from .errors import PatternLocatorError
-from .head import angles_from_joint_state, HeadGeometry, JointStateBuffer
 from .image_codec import camera_from_info, fill_msg, image_from_msg
-from .localizer import FrameResult, RobotLocalizer
-from .overlay import draw_overlay
-from .pattern import load_pattern_config
 from .ros_helpers import fill_pose, parameter_values, run_node, stamp_seconds
+from ..card.pattern import load_pattern_config
+from ..errors import PatternLocatorError
+from ..localization.building import load_building
+from ..localization.head import angles_from_joint_state, HeadGeometry, JointStateBuffer
+from ..localization.localizer import FrameResult, RobotLocalizer
+from ..vision.camera import CameraModel
+from ..vision.overlay import draw_overlay
 
 THROTTLE_S = 5.0
 

@@ -18,11 +18,11 @@ from typing import Iterator, Sequence
 def node_process(module: str, log: Path, parameters: Sequence[str] = ()
                  ) -> Iterator[subprocess.Popen]:
     """
-    Run ``python -m pattern_locator.<module>`` (its output in ``log``); Ctrl-C it at the end.
+    Run ``python -m pattern_locator.nodes.<module>`` (its output in ``log``); Ctrl-C it at the end.
 
     ``parameters`` are ``name:=value`` strings.
     """
-    args = [sys.executable, '-m', f'pattern_locator.{module}', '--ros-args']
+    args = [sys.executable, '-m', f'pattern_locator.nodes.{module}', '--ros-args']
     for parameter in parameters:
         args += ['-p', parameter]
     with open(log, 'w') as out:

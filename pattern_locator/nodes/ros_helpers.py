@@ -6,8 +6,8 @@ from typing import Any, Callable, Dict, Iterable
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 
-from .errors import PatternLocatorError
-from .geometry import Pose, quaternion_xyzw
+from ..errors import PatternLocatorError
+from ..vision.geometry import Pose, quaternion_xyzw
 
 
 def declare_number(node: Node, name: str, value: float, description: str,

@@ -34,15 +34,15 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
-from .errors import PatternLocatorError
-from .geometry import Pose
-from .head import HeadGeometry
 from .image_codec import fill_camera_info, fill_msg
 from .ros_helpers import (declare_integer, declare_number, declare_value, fill_pose,
                           parameter_values, run_node)
-from .sim_world import RouteStop, SimRoute, SimScene
-from .visca_emulator import EmulatedEviD31
-from .zoom_table import ZoomTable
+from ..errors import PatternLocatorError
+from ..localization.head import HeadGeometry
+from ..sim.world import RouteStop, SimRoute, SimScene
+from ..visca.emulator import EmulatedEviD31
+from ..visca.zoom_table import ZoomTable
+from ..vision.geometry import Pose
 
 PARAMETERS = ('floor', 'room', 'mode', 'dwell_s', 'speed_m_s', 'n_stops', 'seed',
               'frame_rate_hz', 'camera_link', 'zoom_table', 'field_rate_hz', 'init_s',

@@ -15,9 +15,9 @@ from typing import List, Tuple
 
 import numpy as np
 
-from .building import wall_card_rotation
-from .camera import CameraModel
-from .geometry import look_at, Pose, rodrigues
+from ..localization.building import wall_card_rotation
+from ..vision.camera import CameraModel
+from ..vision.geometry import look_at, Pose, rodrigues
 
 ROOM_SIZE = (10.0, 5.0)           # metres: 50 m^2
 ROOM_HEIGHT = 2.5

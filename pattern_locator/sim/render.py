@@ -33,10 +33,10 @@ from typing import List, Optional, Protocol, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .camera import CameraModel
-from .errors import CodeError, ConfigError, ImageError
-from .geometry import look_at, Pose, rodrigues
-from .pattern import Code, PatternConfig, srgb_to_linear
+from ..card.pattern import Code, PatternConfig, srgb_to_linear
+from ..errors import CodeError, ConfigError, ImageError
+from ..vision.camera import CameraModel
+from ..vision.geometry import look_at, Pose, rodrigues
 
 BACKGROUNDS = ('wall', 'clutter', 'black', 'white')
 # Surfaces closer than this to the camera plane (metres) are not rendered.

@@ -23,15 +23,15 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import cv2
 import numpy as np
 
-from .building import BuildingMap, load_building, MappedCard, Room
-from .camera import CameraModel
-from .errors import CodeError, ConfigError, ImageError
-from .geometry import Pose, rodrigues
-from .head import HeadGeometry
 from .paper_setup import route
-from .pattern import load_pattern_config, PatternConfig
 from .render import (CardPlacement, clip_in_front, DotCardTexture, NEAR_PLANE, render_scene,
                      RenderOptions)
+from ..card.pattern import load_pattern_config, PatternConfig
+from ..errors import CodeError, ConfigError, ImageError
+from ..localization.building import BuildingMap, load_building, MappedCard, Room
+from ..localization.head import HeadGeometry
+from ..vision.camera import CameraModel
+from ..vision.geometry import Pose, rodrigues
 
 ROUTE_MODES = ('stops', 'drive')
 PAPER_FLOOR, PAPER_ROOM = 1, 3

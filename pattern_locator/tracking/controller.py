@@ -38,10 +38,10 @@ import math
 import threading
 from typing import Deque, List, Optional, Sequence, Tuple
 
-from .errors import ConfigError
-from .head import EVI_D31_PAN_LIMITS_RAD, EVI_D31_TILT_LIMITS_RAD, limit_pair
-from .visca import (PAN_MAX_DEG_S, PAN_SPEED_MAX, TILT_MAX_DEG_S, TILT_SPEED_MAX, ZOOM_TELE,
-                    ZOOM_WIDE)
+from ..errors import ConfigError
+from ..localization.head import EVI_D31_PAN_LIMITS_RAD, EVI_D31_TILT_LIMITS_RAD, limit_pair
+from ..visca.protocol import (PAN_MAX_DEG_S, PAN_SPEED_MAX, TILT_MAX_DEG_S, TILT_SPEED_MAX,
+                              ZOOM_TELE, ZOOM_WIDE)
 
 # The EVI-D31's speed steps (visca.md): pan 1..24 of 80/24 deg/s, tilt 1..20 of 2.5 deg/s.
 PAN_MAX_STEPS = PAN_SPEED_MAX

@@ -18,10 +18,10 @@ import threading
 import time
 from typing import Callable, Dict, Optional, Tuple
 
-from .errors import PatternLocatorError
-from .tracking import HeadCommand, MODE_IDLE, TrackingController
-from .visca import ViscaError
-from .visca_camera import EviD31
+from .controller import HeadCommand, MODE_IDLE, TrackingController
+from ..errors import PatternLocatorError
+from ..visca.camera import EviD31
+from ..visca.protocol import ViscaError
 
 logger = logging.getLogger(__name__)
 

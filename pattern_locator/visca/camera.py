@@ -9,7 +9,7 @@ about +z up), positive tilt = look up. VISCA counts pan positive to the
 :class:`EviD31` adds the camera's start-up (Address Set, IF_Clear, power and
 initialisation), speed quantisation, and motion bookkeeping (a Drive cancels
 a running absolute/relative move first, since the camera refuses it otherwise)
-to :class:`~pattern_locator.visca_transport.ViscaTransport`. It is
+to :class:`~pattern_locator.visca.transport.ViscaTransport`. It is
 thread-safe: a ROS node may poll :meth:`EviD31.position` / :meth:`EviD31.zoom`
 from one timer and call :meth:`EviD31.drive` from another.
 """
@@ -23,9 +23,9 @@ from typing import Callable, Optional, Tuple, TypeVar
 
 import serial
 
-from . import visca
-from .visca_transport import (CommandResult, ViscaCommandError, ViscaConnectionError,
-                              ViscaTimeout, ViscaTransport)
+from . import protocol as visca
+from .transport import (CommandResult, ViscaCommandError, ViscaConnectionError, ViscaTimeout,
+                        ViscaTransport)
 
 logger = logging.getLogger(__name__)
 _T = TypeVar('_T')
@@ -101,8 +101,8 @@ class EviD31:
     Positive pan turns the head **left** (counter-clockwise seen from above);
     the camera's own VISCA pan is positive right and is negated here.
     Positive tilt looks up (as in VISCA). Call :meth:`start` before anything
-    else. Errors are :class:`~pattern_locator.visca.ViscaError` subclasses
-    from :mod:`pattern_locator.visca_transport`; while the port is gone every
+    else. Errors are :class:`~pattern_locator.visca.protocol.ViscaError` subclasses
+    from :mod:`pattern_locator.visca.transport`; while the port is gone every
     call raises ``ViscaConnectionError`` at once, and after it comes back the
     start-up runs again in the background (``ready`` tells when it is done;
     commands sent while its Address Set / IF_Clear run raise

@@ -6,7 +6,7 @@ real RS-232 port (the slave is set raw, so 0x0D/0x11/0x13 pass unchanged) and
 answers VISCA the way ``design/visca.md`` describes, with a continuous-time
 model of the head so :meth:`EmulatedEviD31.state` is right at any instant
 (for rendering a simulated camera image). Packets are built and parsed with
-:mod:`pattern_locator.visca`.
+:mod:`pattern_locator.visca.protocol`.
 
 Timing
     One received packet (command, inquiry, cancel or broadcast) is processed
@@ -120,14 +120,14 @@ import time
 import tty
 from typing import Callable, Deque, Dict, List, Mapping, Optional, Tuple
 
-from .visca import (ack, address_set_reply, answer, BROADCAST, completion, decode_nibbles,
-                    error, ERROR_BUFFER_FULL, ERROR_CANCELLED, ERROR_MESSAGE_LENGTH,
-                    ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX, MAX_PACKET,
-                    network_change, PacketFramer, PAN_LIMIT_UNITS, pan_speed_deg_s,
-                    PAN_SPEED_MAX, pan_tilt_position_payload, PAN_UNITS_PER_DEG, POWER_ON,
-                    POWER_STANDBY, TERMINATOR, TILT_LIMIT_UNITS, tilt_speed_deg_s,
-                    TILT_SPEED_MAX, TILT_UNITS_PER_DEG, zoom_position_payload, ZOOM_SPEED_MAX,
-                    ZOOM_SPEED_MIN, ZOOM_TELE, ZOOM_WIDE)
+from .protocol import (ack, address_set_reply, answer, BROADCAST, completion, decode_nibbles,
+                       error, ERROR_BUFFER_FULL, ERROR_CANCELLED, ERROR_MESSAGE_LENGTH,
+                       ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX, MAX_PACKET,
+                       network_change, PacketFramer, PAN_LIMIT_UNITS, pan_speed_deg_s,
+                       PAN_SPEED_MAX, pan_tilt_position_payload, PAN_UNITS_PER_DEG, POWER_ON,
+                       POWER_STANDBY, TERMINATOR, TILT_LIMIT_UNITS, tilt_speed_deg_s,
+                       TILT_SPEED_MAX, TILT_UNITS_PER_DEG, zoom_position_payload, ZOOM_SPEED_MAX,
+                       ZOOM_SPEED_MIN, ZOOM_TELE, ZOOM_WIDE)
 
 VENDOR_ID = 0x0001
 MODEL_ID = 0x0402

@@ -14,7 +14,7 @@ layer's job.
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
-from .errors import PatternLocatorError
+from ..errors import PatternLocatorError
 
 
 class ViscaError(PatternLocatorError):

@@ -10,7 +10,7 @@ Threading model:
 * The caller's thread writes (writes are serialised by a lock) and then waits
   on an event for its reply.
 * One I/O thread owns every read. It frames the byte stream with
-  :class:`~pattern_locator.visca.PacketFramer`, parses each packet and hands it
+  :class:`~pattern_locator.visca.protocol.PacketFramer`, parses each packet and hands it
   to whoever waits for it. Around the read loop sits the reconnect loop (the
   nmea_navsat_driver TCP node's shape): when the port fails, it closes it,
   fails every waiter at once with :class:`ViscaConnectionError` and reopens
@@ -38,9 +38,9 @@ from typing import Callable, Dict, List, Optional
 
 import serial
 
-from .visca import (BROADCAST, cancel as cancel_packet, ERROR_BUFFER_FULL, ERROR_CANCELLED,
-                    ERROR_MESSAGE_LENGTH, ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX,
-                    hex_bytes, PacketFramer, parse_reply, Reply, reply_header, ViscaError)
+from .protocol import (BROADCAST, cancel as cancel_packet, ERROR_BUFFER_FULL, ERROR_CANCELLED,
+                       ERROR_MESSAGE_LENGTH, ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX,
+                       hex_bytes, PacketFramer, parse_reply, Reply, reply_header, ViscaError)
 
 logger = logging.getLogger(__name__)
 

@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 import yaml
 
-from .errors import CameraError
-from .resources import read_yaml
+from ..errors import CameraError
+from ..resources import read_yaml
 
 DISTORTION_MODELS = ('plumb_bob', 'rational_polynomial', 'equidistant', 'none')
 

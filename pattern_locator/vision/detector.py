@@ -33,8 +33,8 @@ import cv2
 import numpy as np
 
 from .camera import CameraModel
-from .errors import CodeError, ImageError
-from .pattern import Code, Ids, PatternConfig, RING_POINTS, srgb_to_linear
+from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS, srgb_to_linear
+from ..errors import CodeError, ImageError
 
 
 @dataclass(frozen=True)

@@ -12,10 +12,10 @@ import numpy as np
 
 from .camera import CameraModel
 from .detector import CardDetection, Detector, DetectorParams
-from .errors import ConfigError, EstimationError
 from .geometry import Pose
-from .pattern import PatternConfig
 from .pose_exact import covariance_of_pose, estimate_exact, paper_angles, PosePrior
+from ..card.pattern import PatternConfig
+from ..errors import ConfigError, EstimationError
 
 ESTIMATORS = ('exact', 'paper')
 

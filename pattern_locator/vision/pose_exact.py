@@ -26,9 +26,9 @@ import cv2
 import numpy as np
 
 from .camera import CameraModel
-from .errors import EstimationError
 from .geometry import Pose
-from .pattern import PatternConfig
+from ..card.pattern import PatternConfig
+from ..errors import EstimationError
 
 MIN_POINTS = 6
 DEFAULT_MIN_SIGMA_PX = 0.05   # floor of the pixel noise used for the covariance

@@ -98,9 +98,9 @@ from typing import List, Optional, Tuple
 import numpy as np
 
 from .camera import CameraModel
-from .errors import EstimationError
 from .geometry import Pose, rodrigues
-from .pattern import PatternConfig, RING_POINTS
+from ..card.pattern import PatternConfig, RING_POINTS
+from ..errors import EstimationError
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,9 @@
 """Pattern geometry, code layout and the code's text form."""
 
 import numpy as np
+from pattern_locator.card.pattern import (Code, Ids, load_pattern_config, pattern_config_from_dict,
+                                          PatternConfig)
 from pattern_locator.errors import CodeError, ConfigError
-from pattern_locator.pattern import (Code, Ids, load_pattern_config, pattern_config_from_dict,
-                                     PatternConfig)
 import pytest
 
 

@@ -9,12 +9,12 @@ import zlib
 import cv2
 import numpy as np
 # The package is not declared an application import, so it sorts as third party.
+from pattern_locator.card.pattern import Ids, PatternConfig
+from pattern_locator.card.printable import (CardSheet, Circle, layout_card, Line, MARGIN_MM,
+                                            OVERLAP_MM, PAPER_SIZES_MM, pdf_document, png_bytes,
+                                            png_image, PrintError, PT_PER_MM, Rect, svg_document,
+                                            Text, tile_paths, write_card)
 from pattern_locator.errors import CodeError, ConfigError, PatternLocatorError
-from pattern_locator.pattern import Ids, PatternConfig
-from pattern_locator.printable import (
-    CardSheet, Circle, layout_card, Line, MARGIN_MM, OVERLAP_MM, PAPER_SIZES_MM, pdf_document,
-    png_bytes, png_image, PrintError, PT_PER_MM, Rect, svg_document, Text, tile_paths,
-    write_card)
 import pytest
 
 SVG = '{http://www.w3.org/2000/svg}'

@@ -5,14 +5,15 @@ import math
 
 import cv2
 import numpy as np
-from pattern_locator.baselines import (
-    AprilTagLocator, ArucoLocator, KINDS, make_locator, square_pose, square_pose_solutions,
-    tag_black_size, tag_card_bitmap, tag_object_points)
-from pattern_locator.camera import CameraModel
 from pattern_locator.errors import ImageError
-from pattern_locator.geometry import Pose, rotation_angle
-from pattern_locator.render import (
-    BitmapCardTexture, card_pose_facing, CardPlacement, render_scene, RenderOptions)
+from pattern_locator.evaluation.baselines import (AprilTagLocator, ArucoLocator, KINDS,
+                                                  make_locator, square_pose, square_pose_solutions,
+                                                  tag_black_size, tag_card_bitmap,
+                                                  tag_object_points)
+from pattern_locator.sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement,
+                                        render_scene, RenderOptions)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import Pose, rotation_angle
 import pytest
 
 CARD = 0.3

@@ -3,8 +3,8 @@
 import math
 
 import numpy as np
-from pattern_locator import bench
-from pattern_locator.pattern import load_pattern_config
+from pattern_locator.card.pattern import load_pattern_config
+from pattern_locator.evaluation import bench
 import pytest
 
 

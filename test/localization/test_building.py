@@ -6,14 +6,14 @@ import textwrap
 
 import numpy as np
 # The package is not declared an application import, so it sorts as third party.
-from pattern_locator.building import (
-    building_from_dict, BuildingMap, card_file_name, default_room_frame, load_building,
-    rpy_rotation, wall_card_rotation, write_building_cards)
+from pattern_locator.card.pattern import CENTRE, Code, CodeField, Ids, load_pattern_config
+from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.errors import CodeError, ConfigError, PrintError
-from pattern_locator.geometry import Pose, quaternion_xyzw
-from pattern_locator.paper_setup import CARD_HEIGHT, room_cards, ROOM_HEIGHT, ROOM_SIZE
-from pattern_locator.pattern import CENTRE, Code, CodeField, Ids, load_pattern_config
-from pattern_locator.pattern import PatternConfig
+from pattern_locator.localization.building import (building_from_dict, BuildingMap, card_file_name,
+                                                   default_room_frame, load_building, rpy_rotation,
+                                                   wall_card_rotation, write_building_cards)
+from pattern_locator.sim.paper_setup import CARD_HEIGHT, room_cards, ROOM_HEIGHT, ROOM_SIZE
+from pattern_locator.vision.geometry import Pose, quaternion_xyzw
 import pytest
 
 PATTERN = load_pattern_config()

@@ -4,12 +4,12 @@ import math
 
 import numpy as np
 from pattern_locator.errors import ConfigError, PatternLocatorError
-from pattern_locator.geometry import look_at, Pose, rodrigues
-from pattern_locator.head import (angles_from_joint_state, base_pose_from_camera,
-                                  covariance_to_base, head_angles, HeadGeometry,
-                                  HeadStateError, JointStateBuffer, R_TILT_OPTICAL,
-                                  up_in_camera)
-from pattern_locator.pose_exact import PosePrior
+from pattern_locator.localization.head import (angles_from_joint_state, base_pose_from_camera,
+                                               covariance_to_base, head_angles, HeadGeometry,
+                                               HeadStateError, JointStateBuffer, R_TILT_OPTICAL,
+                                               up_in_camera)
+from pattern_locator.vision.geometry import look_at, Pose, rodrigues
+from pattern_locator.vision.pose_exact import PosePrior
 import pytest
 
 HEAD = HeadGeometry()

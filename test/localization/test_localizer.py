@@ -3,10 +3,10 @@
 import math
 
 import numpy as np
-from pattern_locator.building import building_from_dict
 from pattern_locator.errors import ConfigError
-from pattern_locator.geometry import rotation_angle
-from pattern_locator.localizer import RobotLocalizer
+from pattern_locator.localization.building import building_from_dict
+from pattern_locator.localization.localizer import RobotLocalizer
+from pattern_locator.vision.geometry import rotation_angle
 import pytest
 from scene_tools import base_pose, BUILDING, CAMERA, HEAD, PATTERN, view
 

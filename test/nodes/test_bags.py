@@ -14,11 +14,11 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
-from pattern_locator.bags import (IMAGE_TOPIC, JOINT_SAMPLE_OFFSET_NS, play, record_sim,
-                                  sim_stops, SIM_TOPICS, START_NS, TRUTH_TOPIC)
 from pattern_locator.errors import ConfigError
-from pattern_locator.geometry import rotation_from_quaternion
-from pattern_locator.paper_setup import route
+from pattern_locator.nodes.bags import (IMAGE_TOPIC, JOINT_SAMPLE_OFFSET_NS, play, record_sim,
+                                        sim_stops, SIM_TOPICS, START_NS, TRUTH_TOPIC)
+from pattern_locator.sim.paper_setup import route
+from pattern_locator.vision.geometry import rotation_from_quaternion
 import pytest
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -29,7 +29,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import String, UInt16MultiArray
 import yaml
 
-BAG = Path(__file__).resolve().parent / 'data' / 'paper_route'
+BAG = Path(__file__).resolve().parents[1] / 'data' / 'paper_route'
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 FRAME = 'floor_1/room_3'
 # Measured on the checked-in bag: at most 1.0 cm and 0.14 degrees of heading.
@@ -113,7 +113,7 @@ def test_checked_in_bag():
     assert {(m.width, m.height, m.encoding) for m in images} == {(640, 480, 'bgr8')}
     assert len(bag[TRUTH_TOPIC]) == 30 and len(bag['/camera/joint_states']) == 60
     # The ground truth is what the current code would record (else regenerate the bag:
-    # python -m pattern_locator.bags test/data/paper_route).
+    # python -m pattern_locator.nodes.bags test/data/paper_route).
     for (T_room_base, _, _, _), (_, truth) in zip(sim_stops(30), bag[TRUTH_TOPIC]):
         p, q = truth.pose.position, truth.pose.orientation
         assert np.allclose([p.x, p.y, p.z], T_room_base.t, atol=1e-9)

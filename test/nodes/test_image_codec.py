@@ -12,8 +12,8 @@ import array
 import cv2
 import numpy as np
 from pattern_locator.errors import ImageError
-from pattern_locator.image_codec import (decode_image, encode_image, fill_msg, image_from_msg,
-                                         SUPPORTED_ENCODINGS)
+from pattern_locator.nodes.image_codec import (decode_image, encode_image, fill_msg,
+                                               image_from_msg, SUPPORTED_ENCODINGS)
 import pytest
 
 H, W = 48, 64

@@ -14,8 +14,8 @@ import time
 
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 import numpy as np
-from pattern_locator.camera import CameraModel
-from pattern_locator.image_codec import fill_camera_info, fill_msg
+from pattern_locator.nodes.image_codec import fill_camera_info, fill_msg
+from pattern_locator.vision.camera import CameraModel
 import pytest
 from ros_tools import client_node, locator_process, spin_until
 from scene_tools import base_pose, CAMERA, view
@@ -219,8 +219,8 @@ def test_ctrl_c_is_a_clean_shutdown(locator, graph):
 
 def test_a_bad_configuration_exits_1_with_one_line_on_stderr(tmp_path):
     missing = tmp_path / 'no_such_building.yaml'
-    proc = subprocess.run([sys.executable, '-m', 'pattern_locator.locator_node', '--ros-args',
-                           '-p', f'building_map:={missing}'],
+    proc = subprocess.run([sys.executable, '-m', 'pattern_locator.nodes.locator_node',
+                           '--ros-args', '-p', f'building_map:={missing}'],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 1
     assert proc.stderr.strip().splitlines()[-1] == (

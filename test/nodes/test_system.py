@@ -13,11 +13,11 @@ import sys
 import time
 
 import numpy as np
-from pattern_locator.demo_system import camera_errors, run_closed_loop, stop_of
-from pattern_locator.geometry import Pose
-from pattern_locator.node_process import node_process
-from pattern_locator.sim_world import RouteStop, SimRoute
-from pattern_locator.visca_emulator import EmulatedEviD31
+from pattern_locator.evaluation.demo_system import camera_errors, run_closed_loop, stop_of
+from pattern_locator.nodes.node_process import node_process
+from pattern_locator.sim.world import RouteStop, SimRoute
+from pattern_locator.visca.emulator import EmulatedEviD31
+from pattern_locator.vision.geometry import Pose
 import pytest
 from ros_tools import client_node, locator_process, spin_until
 from scene_tools import CAMERA, view
@@ -177,7 +177,7 @@ def test_camera_errors_are_the_papers_quantities():
 
 def test_fake_camera_command_prints_its_port_and_answers_visca(tmp_path):
     import serial
-    from pattern_locator import visca
+    from pattern_locator.visca import protocol as visca
     link = tmp_path / 'cam'
     proc = subprocess.Popen([sys.executable, '-m', 'pattern_locator.cli', 'fake-camera',
                              '--link', str(link), '--init-s', '0.1'],
@@ -231,10 +231,10 @@ def test_the_papers_estimator_runs_in_the_locator_node(tmp_path):
 def test_shipped_parameter_files_name_only_declared_parameters(config, node_module):
     import importlib
     import yaml
-    path = Path(__file__).resolve().parent.parent / 'config' / config
+    path = Path(__file__).resolve().parents[2] / 'config' / config
     data = yaml.safe_load(path.read_text())
     (node_name, section), = data.items()
     names = set(section['ros__parameters'])
-    module = importlib.import_module(f'pattern_locator.{node_module}')
+    module = importlib.import_module(f'pattern_locator.nodes.{node_module}')
     declared = set(module.PARAMETERS)
     assert names == declared, (names ^ declared)

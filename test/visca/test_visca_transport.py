@@ -7,8 +7,8 @@ import threading
 import time
 import tty
 
-from pattern_locator import visca as v
-from pattern_locator.visca_transport import (CommandResult, ViscaBufferFull, ViscaCancelled,
+from pattern_locator.visca import protocol as v
+from pattern_locator.visca.transport import (CommandResult, ViscaBufferFull, ViscaCancelled,
                                              ViscaCommandError, ViscaConnectionError,
                                              ViscaMessageLengthError, ViscaNotExecutable,
                                              ViscaSyntaxError, ViscaTimeout, ViscaTransport)

@@ -5,8 +5,8 @@ import textwrap
 
 import numpy as np
 from pattern_locator.errors import ConfigError
-from pattern_locator.zoom_table import (approximate_hfov_deg, approximate_table, write_table,
-                                        ZOOM_MAX, ZoomEntry, ZoomTable)
+from pattern_locator.visca.zoom_table import (approximate_hfov_deg, approximate_table, write_table,
+                                              ZOOM_MAX, ZoomEntry, ZoomTable)
 import pytest
 
 TABLE = ZoomTable.load()

@@ -1,8 +1,8 @@
 """Camera intrinsics: ROS camera-info YAML, projection and undistortion."""
 
 import numpy as np
-from pattern_locator.camera import CameraModel, load_camera, save_camera
 from pattern_locator.errors import CameraError
+from pattern_locator.vision.camera import CameraModel, load_camera, save_camera
 import pytest
 import yaml
 

@@ -13,13 +13,13 @@ import math
 
 import cv2
 import numpy as np
-from pattern_locator.camera import CameraModel
-from pattern_locator.detector import Detector
+from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.errors import ImageError
-from pattern_locator.pattern import Code, PatternConfig
-from pattern_locator.pose_exact import ellipse_centres
-from pattern_locator.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
-                                    render_scene, RenderOptions)
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
+                                        render_scene, RenderOptions)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.detector import Detector
+from pattern_locator.vision.pose_exact import ellipse_centres
 import pytest
 
 CFG = PatternConfig()

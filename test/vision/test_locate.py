@@ -5,14 +5,14 @@ import math
 
 import cv2
 import numpy as np
-from pattern_locator.camera import CameraModel
+from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.errors import ConfigError
-from pattern_locator.geometry import Pose, rodrigues, rotation_angle, rotation_vector
-from pattern_locator.locate import CardLocator
-from pattern_locator.pattern import PatternConfig
-from pattern_locator.pose_exact import paper_angles, PosePrior
-from pattern_locator.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
-                                    render_scene, RenderOptions)
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
+                                        render_scene, RenderOptions)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import Pose, rodrigues, rotation_angle, rotation_vector
+from pattern_locator.vision.locate import CardLocator
+from pattern_locator.vision.pose_exact import paper_angles, PosePrior
 import pytest
 
 CFG = PatternConfig()

@@ -3,8 +3,8 @@
 import math
 
 import numpy as np
-from pattern_locator.localizer import RobotLocalizer
-from pattern_locator.overlay import draw_overlay
+from pattern_locator.localization.localizer import RobotLocalizer
+from pattern_locator.vision.overlay import draw_overlay
 from scene_tools import base_pose, BUILDING, CAMERA, HEAD, PATTERN, view
 
 

@@ -3,12 +3,12 @@
 import math
 
 import numpy as np
-from pattern_locator.camera import CameraModel
+from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.errors import EstimationError
-from pattern_locator.geometry import look_at, Pose, rotation_angle
-from pattern_locator.pattern import PatternConfig
-from pattern_locator.pose_exact import (ellipse_centres, estimate_exact, paper_angles,
-                                        pose_covariance, PosePrior)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import look_at, Pose, rotation_angle
+from pattern_locator.vision.pose_exact import (ellipse_centres, estimate_exact, paper_angles,
+                                               pose_covariance, PosePrior)
 import pytest
 
 CFG = PatternConfig()

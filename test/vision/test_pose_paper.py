@@ -3,12 +3,12 @@
 import math
 
 import numpy as np
-from pattern_locator.camera import CameraModel
+from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.errors import EstimationError
-from pattern_locator.geometry import look_at, Pose, rodrigues, rotation_angle
-from pattern_locator.pattern import PatternConfig
-from pattern_locator.pose_paper import (
-    camera_axes, camera_position, estimate_paper, fit_conic, pose_from_angles, ring_view)
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import look_at, Pose, rodrigues, rotation_angle
+from pattern_locator.vision.pose_paper import (camera_axes, camera_position, estimate_paper,
+                                               fit_conic, pose_from_angles, ring_view)
 import pytest
 
 CFG = PatternConfig()

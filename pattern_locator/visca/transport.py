@@ -1,8 +1,8 @@
 """
 VISCA serial transport: one reader thread, replies matched to requests, reconnects.
 
-ROS-free. The layers follow ``design/style.md``: ``visca.py`` turns packets into
-values, this module moves packets over a serial port, ``visca_camera.py`` gives
+ROS-free. The layers follow ``design/style.md``: ``protocol.py`` turns packets into
+values, this module moves packets over a serial port, ``camera.py`` gives
 them meaning.
 
 Threading model:

@@ -16,11 +16,14 @@ from typing import List, Optional, Sequence
 import cv2
 import numpy as np
 
+from . import __version__
 from .card.pattern import load_pattern_config
 from .errors import ConfigError, PatternLocatorError
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
+# 16 Mpx: a large camera's frame; a header declaring more is refused unread.
+MAX_IMAGE_PIXELS = 16_000_000
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -47,37 +50,72 @@ def _error(message: str) -> None:
     print(f'{PROG}: error: {message}', file=sys.stderr)
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, like every other error."""
+
+    def error(self, message: str) -> None:  # noqa: D102 (argparse's own contract)
+        self.exit(2, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
+def _number_in(low: float, high: float, kind=float, what: str = 'value'):
+    """Return an argparse type: a finite number of ``kind`` within [low, high]."""
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{what} must be a number, got {text!r}') from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f'{what} must be in {low:g}..{high:g}, got {text}')
+        return value
+    return parse
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG, description='Locate a camera from printed colour-dot cards.')
+    parser.add_argument('--version', action='version', version=f'{PROG} {__version__}',
+                        help='print the version and exit')
     sub = parser.add_subparsers(title='commands')
 
     make = sub.add_parser('make-pattern', help='print a card (SVG, PDF or PNG)',
-                          description='Write a printable card at true millimetre scale.')
-    make.add_argument('--floor', type=int)
-    make.add_argument('--room', type=int)
-    make.add_argument('--pattern', type=int, help='card number in the room')
+                          description='Write a printable card at true millimetre scale: one '
+                                      'card by its ids, or every card of a building map.')
+    make.add_argument('--floor', type=int, help='floor id of the card (0-11 by default)')
+    make.add_argument('--room', type=int, help='room id on its floor (1-81 by default)')
+    make.add_argument('--pattern', type=int, help='card number in the room (1-9 by default)')
     make.add_argument('--all', metavar='BUILDING', dest='building',
-                      help='print every card of a building map into the directory -o')
-    make.add_argument('--format', choices=('pdf', 'svg', 'png'), default='pdf',
-                      help='file format with --all (default pdf)')
+                      help='print every card of a building map into the directory -o '
+                           '(instead of --floor/--room/--pattern)')
+    make.add_argument('--format', choices=('pdf', 'svg', 'png'),
+                      help='file format with --all (default pdf); a single card takes it '
+                           'from the suffix of -o')
     make.add_argument('-o', '--output', required=True,
                       help='output file, its suffix (.svg, .pdf, .png) picking the format; '
                            'a directory with --all')
     make.add_argument('--paper', default='a3', choices=('a3', 'tabloid', 'a4', 'letter'),
                       help='sheet size; a4 and letter tile the card over several sheets '
                            '(default: a3)')
-    make.add_argument('--dpi', type=float, default=300.0, help='PNG resolution (default 300)')
+    make.add_argument('--dpi', type=_number_in(72, 2400, what='--dpi'), default=300.0,
+                      help='PNG resolution, 72-2400 (default 300)')
     make.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
     make.set_defaults(handler=_make_pattern)
 
     detect = sub.add_parser('detect', help='find cards in images and locate the camera',
                             description='Detect cards and estimate the camera pose.')
-    detect.add_argument('images', nargs='+', metavar='IMAGE')
-    detect.add_argument('--camera', required=True, help='ROS camera-info YAML')
-    detect.add_argument('--estimator', choices=ESTIMATORS, default='exact')
-    detect.add_argument('--min-tilt', type=float, default=0.0, metavar='DEG',
+    detect.add_argument('images', nargs='+', metavar='IMAGE',
+                        help='image files (PNG, JPEG, ...; colour for the code, grey gives '
+                             'geometry only)')
+    detect.add_argument('--camera', required=True,
+                        help='ROS camera-info YAML of the camera that took the images')
+    detect.add_argument('--estimator', choices=ESTIMATORS, default='exact',
+                        help="pose estimator: exact (default) or the paper's")
+    detect.add_argument('--min-tilt', type=_number_in(0.0, 89.0, what='--min-tilt'),
+                        default=0.0, metavar='DEG',
                         help="reject views tilted less than this (the paper's rule: 25)")
+    detect.add_argument('--max-pixels', type=_number_in(1, 2 ** 31, int, '--max-pixels'),
+                        default=MAX_IMAGE_PIXELS, metavar='N',
+                        help=f'refuse images larger than this, before decoding '
+                             f'(default {MAX_IMAGE_PIXELS})')
     detect.add_argument('--json', action='store_true', help='one JSON object per image')
     detect.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
     detect.set_defaults(handler=_detect)
@@ -87,7 +125,7 @@ def _parser() -> argparse.ArgumentParser:
                                        'and ArUco, printing tables.')
     bench.add_argument('--scenes', type=int, default=40,
                        help='scenes per distance bin and camera (default 40)')
-    bench.add_argument('--seed', type=int, default=1)
+    bench.add_argument('--seed', type=int, default=1, help='seed of the scenes (default 1)')
     bench.add_argument('--quick', action='store_true', help='a small run for smoke tests')
     bench.add_argument('--tracking', action='store_true',
                        help='the tracking loop in closed loop (sim + camera_driver + locator)')
@@ -102,7 +140,7 @@ def _parser() -> argparse.ArgumentParser:
     record.add_argument('out', help='bag directory to create')
     record.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
     record.add_argument('--rate', type=float, default=2.0, help='images per second')
-    record.add_argument('--seed', type=int, default=7)
+    record.add_argument('--seed', type=int, default=7, help='seed of the noise (default 7)')
     record.set_defaults(handler=_bag_record)
     play = bag_sub.add_parser('play', help='publish a bag with its recorded timing')
     play.add_argument('bag', help='bag directory (or .mcap / .db3 file)')
@@ -121,7 +159,8 @@ def _parser() -> argparse.ArgumentParser:
                           description='Run sim, camera_driver and locator as processes over '
                                       "DDS along the paper's route; print the errors in the "
                                       'form of its Table 1 and plot the paths.')
-    demo.add_argument('--estimator', choices=ESTIMATORS, default='exact')
+    demo.add_argument('--estimator', choices=ESTIMATORS, default='exact',
+                      help="the locator's pose estimator (default exact)")
     demo.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
     demo.add_argument('--dwell', type=float, default=2.5, help='seconds at each stop')
     demo.add_argument('--zoom', action='store_true', help='let the driver zoom on the card')
@@ -139,12 +178,23 @@ def _parser() -> argparse.ArgumentParser:
 def _make_pattern(args: argparse.Namespace) -> int:
     from .card.pattern import Ids
     from .card.printable import write_card
+    given = [f'--{name}' for name in ('floor', 'room', 'pattern')
+             if getattr(args, name) is not None]
+    if args.building and given:
+        raise ConfigError(f'make-pattern: --all prints every card of the map; it takes no '
+                          f'{", ".join(given)}')
+    if args.format and not args.building:
+        raise ConfigError('make-pattern: --format is for --all; a single card takes its '
+                          'format from the suffix of -o')
     cfg = load_pattern_config(args.pattern_config)
     if args.building:
+        from tqdm import tqdm
         from .localization.building import load_building, write_building_cards
         building = load_building(args.building, cfg)
-        written = write_building_cards(building, cfg, args.output, paper=args.paper,
-                                       fmt=args.format, dpi=args.dpi)
+        written = write_building_cards(
+            building, cfg, args.output, paper=args.paper, fmt=args.format or 'pdf',
+            dpi=args.dpi, progress=lambda cards: tqdm(cards, desc='cards', unit='card',
+                                                      disable=None, leave=False))
         for path in written:
             print(path)
         print(f'{len(building.cards())} cards of {args.building}', file=sys.stderr)
@@ -195,6 +245,8 @@ def _detect(args: argparse.Namespace) -> int:
 
 def _read_image(name: str):
     path = Path(name)
+    if path.is_dir():
+        return f'{name}: is a directory, not an image file'
     if not path.is_file():
         return f'{name}: no such image file'
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -253,9 +305,14 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
     print(f'{name}: {len(located)} card(s) in {elapsed_ms:.1f} ms')
     for card in located:
         det = card.detection
-        ids = (f'floor {det.ids.floor} room {det.ids.room} card {det.ids.pattern}'
-               if det.ids else 'no code (grey image)')
-        print(f'  {det.code}  {ids}  ({det.n_points} dots)')
+        if det.code is None:
+            heading = 'a card, code not read (grey image: geometry only)'
+        elif det.ids is None:
+            heading = f'{det.code}  (not a code of this layout)'
+        else:
+            heading = (f'{det.code}  floor {det.ids.floor} room {det.ids.room} '
+                       f'card {det.ids.pattern}')
+        print(f'  {heading}  ({det.n_points} dots)')
         if card.T_camera_pattern is None:
             print(f'    no pose: {card.problem}')
             continue

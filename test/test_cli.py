@@ -1,5 +1,6 @@
 """The pattern-locator command line: detect and make-pattern, in-process and once as a process."""
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -324,3 +325,70 @@ def test_make_pattern_needs_ids_or_a_building(tmp_path, capsys):
     assert status == 2 and out == ''
     assert err.strip() == ('pattern-locator: error: make-pattern needs --floor, --pattern '
                            '(or --all BUILDING)')
+
+
+# Polish: version, help, conflicting options, grey images -------------------------------------
+
+def _all_parsers(parser):
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                yield from _all_parsers(child)
+
+
+def test_every_option_of_every_command_has_help():
+    from pattern_locator.cli import _parser
+    missing = [f'{p.prog} {a.option_strings or a.dest}' for p in _all_parsers(_parser())
+               for a in p._actions
+               if not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction))
+               and not a.help]
+    assert missing == []
+
+
+def test_version_is_the_package_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(['--version'])
+    assert info.value.code == 0
+    version = re.search(r'<version>([^<]+)</version>', (ROOT / 'package.xml').read_text())
+    assert capsys.readouterr().out.strip() == f'pattern-locator {version.group(1)}'
+
+
+@pytest.mark.parametrize('args, words', [
+    (['--floor', '2', '--all', 'config/building.yaml'], 'takes no --floor'),
+    (['--floor', '2', '--room', '1', '--pattern', '1', '--format', 'svg'],
+     '--format is for --all'),
+    (['--floor', '2', '--room', '1', '--pattern', '1', '--dpi', '5'],
+     '--dpi must be in 72..2400'),
+    (['--floor', '2', '--room', '1', '--pattern', '1', '--dpi', 'nan'], '--dpi must be in'),
+])
+def test_make_pattern_refuses_conflicting_or_bad_options_in_one_line(tmp_path, capsys, args,
+                                                                     words):
+    output = tmp_path / 'card.png'
+    try:
+        status = main(['make-pattern', *args, '-o', str(output)])
+    except SystemExit as exc:
+        status = exc.code
+    out, err = capsys.readouterr()
+    assert status == 2 and out == ''
+    (line,) = [line for line in err.splitlines() if line.strip()]
+    assert words in line and 'Traceback' not in err
+    assert not output.exists()
+
+
+def test_detect_says_a_directory_is_a_directory(scene, capsys):
+    root, paths, _ = scene
+    status, out, err = detect(capsys, str(root), '--camera', paths['camera'])
+    assert status == 2 and out == ''
+    (line,) = error_lines(err)
+    assert line.endswith(f'{root}: is a directory, not an image file')
+
+
+def test_a_grey_image_gives_geometry_and_says_so_without_python_none(scene, capsys, tmp_path):
+    _, paths, poses = scene
+    grey = tmp_path / 'grey.png'
+    cv2.imwrite(str(grey), cv2.cvtColor(cv2.imread(paths['one.png']), cv2.COLOR_BGR2GRAY))
+    status, out, err = detect(capsys, str(grey), '--camera', paths['camera'])
+    assert status == 0 and err == ''
+    assert 'None' not in out
+    assert 'code not read (grey image' in out

@@ -18,7 +18,7 @@ import difflib
 import math
 from pathlib import Path
 import re
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import yaml
@@ -474,12 +474,15 @@ def card_file_name(card: MappedCard, fmt: str = 'pdf') -> str:
 
 def write_building_cards(building: BuildingMap, pattern: PatternConfig,
                          out_dir: Union[str, Path], paper: str = 'a3', fmt: str = 'pdf',
-                         dpi: float = 300) -> List[Path]:
+                         dpi: float = 300,
+                         progress: Callable[[Iterable[MappedCard]], Iterable[MappedCard]] = iter
+                         ) -> List[Path]:
     """
     Write every card of the building into ``out_dir`` (created if needed).
 
     One file per card (:func:`card_file_name`); a tiled SVG or PNG card gives
     one file per sheet (``printable.tile_paths``). Returns the files written.
+    ``progress`` wraps the cards as they are written (e.g. a progress bar).
     Raises PrintError for an unknown format or an unwritable directory and
     ConfigError when ``pattern`` is not the code layout the map was checked
     against (the printed cards would not be the mapped ones).
@@ -505,7 +508,7 @@ def write_building_cards(building: BuildingMap, pattern: PatternConfig,
         raise PrintError(f'{out}: cannot create the output directory '
                          f'({exc.strerror or exc})') from None
     written: List[Path] = []
-    for card in cards:
+    for card in progress(cards):
         written.extend(write_card(out / card_file_name(card, fmt), pattern, card.ids,
                                   paper=paper, dpi=dpi))
     return written

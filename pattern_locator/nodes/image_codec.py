@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from ..errors import CameraError, ImageError
+from ..resources import quote
 from ..vision.camera import camera_from_calibration, CameraModel, MAX_IMAGE_SIDE, NAME_CHARS
 
 # Bytes per pixel of each encoding the decoder reads (the bytes in one row of
@@ -69,6 +70,11 @@ _YUV_CODES: Dict[str, int] = {
 _MSG_FIELDS = ('height', 'width', 'encoding', 'is_bigendian', 'step', 'data')
 
 
+def _short(number: int) -> str:
+    """Return an integer for a message, at most ~20 characters."""
+    return str(number) if abs(number) < 10 ** 18 else f'(an integer of {number.bit_length()} bits)'
+
+
 def _as_int(value: Any, name: str) -> int:
     """Return ``value`` as an int, or raise ImageError if it is not an integer."""
     if isinstance(value, bool):
@@ -88,9 +94,15 @@ def _as_bytes(data: Any) -> np.ndarray:
     if isinstance(data, (list, tuple)):
         # rclpy never gives these, but a hand-built message may.
         try:
-            return np.array(data, dtype=np.uint8)
-        except (OverflowError, TypeError, ValueError) as exc:
-            raise ImageError(f'image data must be a sequence of bytes 0..255: {exc}') from None
+            values = np.array(data)
+        except (OverflowError, TypeError, ValueError):
+            values = None
+        if values is not None and values.size == 0:
+            return np.zeros(0, np.uint8)
+        if (values is None or values.ndim != 1 or values.dtype.kind not in 'iu'
+                or values.min() < 0 or values.max() > 255):
+            raise ImageError('image data must be a flat sequence of integers 0..255')
+        return values.astype(np.uint8)
     try:
         view = memoryview(data)
     except TypeError:
@@ -98,12 +110,18 @@ def _as_bytes(data: Any) -> np.ndarray:
                          f"array.array('B'), got {type(data).__name__}") from None
     if not view.c_contiguous:
         raise ImageError('image data must be a contiguous buffer')
+    if view.nbytes == 0:
+        return np.zeros(0, np.uint8)
     # Casting to 'B' reads any buffer (e.g. array.array('H')) as its raw bytes.
-    return np.frombuffer(view.cast('B') if view.format != 'B' else view, dtype=np.uint8)
+    try:
+        flat = view.cast('B') if view.format != 'B' or view.ndim != 1 else view
+    except (TypeError, ValueError) as exc:
+        raise ImageError(f'image data cannot be read as bytes: {exc}') from None
+    return np.frombuffer(flat, dtype=np.uint8)
 
 
 def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                 data: Any) -> np.ndarray:
+                 data: Any, max_pixels: Optional[int] = None) -> np.ndarray:
     """
     Return the image held by a ``sensor_msgs/Image``'s fields as a numpy array.
 
@@ -111,23 +129,31 @@ def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step
     uint8 (H, W); mono16 keeps its high byte. ``data`` may be bytes,
     bytearray, memoryview or array.array('B') (what rclpy gives); it is read
     without a copy. Bytes past ``width * bytes_per_pixel`` in each row of
-    ``step`` bytes are padding and ignored. Raise ImageError, with one line
-    naming the problem, for anything that cannot be decoded exactly.
+    ``step`` bytes are padding and ignored. ``max_pixels``: refuse a larger
+    ``width * height`` before touching the data. Raise ImageError, with one
+    line naming the problem, for anything that cannot be decoded exactly.
     """
     if not isinstance(encoding, str):
         raise ImageError(f'encoding must be a string, got {type(encoding).__name__}')
     bpp = _BYTES_PER_PIXEL.get(encoding)
     if bpp is None:
-        raise ImageError(f'unsupported image encoding {encoding!r}; supported: '
+        raise ImageError(f'unsupported image encoding {quote(encoding)}; supported: '
                          + ', '.join(SUPPORTED_ENCODINGS))
     height = _as_int(height, 'height')
     width = _as_int(width, 'width')
     step = _as_int(step, 'step')
+    if isinstance(is_bigendian, bool):
+        is_bigendian = int(is_bigendian)
+    is_bigendian = _as_int(is_bigendian, 'is_bigendian')
     if height <= 0 or width <= 0:
-        raise ImageError(f'image size must be positive, got {width}x{height} (width x height)')
+        raise ImageError(f'image size must be positive, got {_short(width)}x{_short(height)} '
+                         '(width x height)')
+    if max_pixels is not None and width * height > max_pixels:
+        raise ImageError(f'image of {_short(width)}x{_short(height)} pixels is larger than the '
+                         f'limit of {max_pixels} pixels')
     row_bytes = width * bpp
     if step < row_bytes:
-        raise ImageError(f'step {step} is smaller than width * bytes per pixel = '
+        raise ImageError(f'step {_short(step)} is smaller than width * bytes per pixel = '
                          f'{width} * {bpp} = {row_bytes} for {encoding}')
     if encoding in _YUV_CODES and width % 2:
         raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
@@ -140,7 +166,8 @@ def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step
     # size fields do not describe the data, so any image read would be a guess.
     if buf.size != expected:
         raise ImageError(f'image data has {buf.size} bytes, expected height * step = '
-                         f'{height} * {step} = {expected} for {width}x{height} {encoding}')
+                         f'{height} * {_short(step)} = {_short(expected)} for '
+                         f'{width}x{height} {encoding}')
 
     rows = buf.reshape(height, step)[:, :row_bytes]
     if encoding == 'mono16':
@@ -211,14 +238,14 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     return height, width, encoding, 0, step, packed.tobytes()
 
 
-def image_from_msg(msg: Any) -> np.ndarray:
+def image_from_msg(msg: Any, max_pixels: Optional[int] = None) -> np.ndarray:
     """Return the image of a ``sensor_msgs/Image`` (see ``decode_image``)."""
     missing = [name for name in _MSG_FIELDS if not hasattr(msg, name)]
     if missing:
-        raise ImageError(f'not a sensor_msgs/Image ({type(msg).__name__}): missing field(s) '
-                         + ', '.join(missing))
+        raise ImageError(f'not a sensor_msgs/Image ({type(msg).__name__[:40]}): missing '
+                         'field(s) ' + ', '.join(missing))
     return decode_image(msg.height, msg.width, msg.encoding, msg.is_bigendian, msg.step,
-                        msg.data)
+                        msg.data, max_pixels)
 
 
 def fill_msg(msg: Any, image: np.ndarray, encoding: str = 'bgr8') -> None:

@@ -7,8 +7,9 @@ from hypothesis import given, HealthCheck, settings, strategies as st
 from pattern_locator.card.pattern import load_pattern_config
 from pattern_locator.errors import CameraError, ConfigError
 from pattern_locator.localization.building import load_building
-from pattern_locator.resources import (MAX_YAML_ALIASES, MAX_YAML_DEPTH, quote, read_yaml,
-                                       UniqueKeyLoader)
+from pattern_locator.resources import (config_path, MAX_YAML_ALIASES, MAX_YAML_DEPTH, quote,
+                                       read_yaml, UniqueKeyLoader)
+from pattern_locator.visca.zoom_table import ZoomTable
 from pattern_locator.vision.camera import load_camera
 import pytest
 import yaml
@@ -17,6 +18,13 @@ FUZZ = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow,
                                        HealthCheck.function_scoped_fixture])
 PATTERN = load_pattern_config()
+PATTERN_TEXT = config_path('pattern.yaml').read_text()
+ZOOM_TEXT = config_path('evi_d31_zoom.yaml').read_text()
+FEW = settings(FUZZ, max_examples=30)
+
+
+def dump(data):
+    return yaml.dump(data, Dumper=yaml.CSafeDumper)
 
 
 def write(tmp_path, text, name='file.yaml'):
@@ -193,10 +201,56 @@ def small_map_with(value, where):
 @FUZZ
 @given(value=yaml_values, where=st.sampled_from(['top', 'floor', 'room', 'card', 'pose']))
 def test_any_building_map_loads_or_gives_a_config_error(tmp_path, value, where):
-    path = write(tmp_path, yaml.safe_dump(small_map_with(value, where)))
+    path = write(tmp_path, dump(small_map_with(value, where)))
     try:
         building = load_building(path, PATTERN)
     except ConfigError as exc:
         assert '\n' not in str(exc)
         return
     assert building.cards()
+
+
+@pytest.mark.parametrize('text', [
+    'code: {ring_digits: {R: .inf}}\n',
+    'code: {fields: {floor: {dots: [x]}}}\n',
+    'code: {fields: {floor: {dots: 5}}}\n',
+])
+def test_pattern_values_of_the_wrong_type_are_config_errors(tmp_path, text):
+    # Found by the property test below: tracebacks (OverflowError, ValueError,
+    # TypeError) before.
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError, match='invalid pattern configuration'):
+        load_pattern_config(path)
+
+
+@FEW
+@given(key=st.sampled_from(['card_size', 'ring_radii', 'ring_dot_radius', 'colours', 'code',
+                            'centre_dot_radius']),
+       value=st.one_of(yaml_values, st.fixed_dictionaries({'fields': yaml_values}),
+                       st.fixed_dictionaries({'ring_digits': yaml_values}),
+                       st.fixed_dictionaries({'fields': st.fixed_dictionaries(
+                           {'floor': st.fixed_dictionaries({'dots': yaml_values})})})))
+def test_any_pattern_configuration_loads_or_gives_a_config_error(tmp_path, key, value):
+    data = yaml.safe_load(PATTERN_TEXT)
+    data[key] = value
+    path = write(tmp_path, dump(data))
+    try:
+        load_pattern_config(path)
+    except ConfigError as exc:
+        assert '\n' not in str(exc)
+
+
+@FEW
+@given(key=st.sampled_from(['image_width', 'image_height', 'distortion_model', 'entries']),
+       value=st.one_of(yaml_values, st.lists(st.dictionaries(st.sampled_from(
+           ['zoom', 'fx', 'fy', 'cx', 'cy', 'd']), yaml_values), max_size=3)))
+def test_any_zoom_table_loads_or_gives_a_config_error(tmp_path, key, value):
+    data = yaml.safe_load(ZOOM_TEXT)
+    data[key] = value
+    path = write(tmp_path, dump(data))
+    try:
+        table = ZoomTable.load(path)
+    except ConfigError as exc:
+        assert '\n' not in str(exc)
+        return
+    table.camera_at(table.zoom_range[0])

@@ -465,7 +465,7 @@ POSITIONS = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(
                       st.integers(-10, 10), st.booleans(), st.none(), st.text(max_size=2))
 
 
-@settings(max_examples=150, deadline=None, derandomize=True, database=None)
+@settings(max_examples=100, deadline=None, derandomize=True, database=None)
 @given(names=st.lists(JOINT_NAMES, max_size=5), positions=st.lists(POSITIONS, max_size=5))
 def test_any_joint_state_gives_angles_within_travel_or_a_head_state_error(names, positions):
     try:
@@ -478,7 +478,7 @@ def test_any_joint_state_gives_angles_within_travel_or_a_head_state_error(names,
     assert HEAD.within_limits(pan, tilt, tolerance_rad=math.radians(5.0))
 
 
-@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
 @given(samples=st.lists(st.tuples(st.floats(0.0, 3.0), POSITIONS, POSITIONS), max_size=20),
        stamps=st.lists(st.floats(-1.0, 5.0), max_size=5))
 def test_the_buffer_never_holds_or_gives_a_bad_angle(samples, stamps):

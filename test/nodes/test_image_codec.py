@@ -21,7 +21,7 @@ from pattern_locator.nodes.image_codec import (camera_from_info, decode_image, e
 from pattern_locator.vision.camera import CameraModel
 import pytest
 
-FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow])
 
 H, W = 48, 64
@@ -584,7 +584,7 @@ def test_not_a_camera_info():
 odd = st.one_of(st.floats(), st.integers(), st.none(), st.text(max_size=3), st.booleans())
 
 
-@FUZZ
+@settings(FUZZ, max_examples=60)
 @given(width=st.one_of(st.just(640), odd), height=st.one_of(st.just(480), odd),
        model=st.one_of(st.sampled_from(['plumb_bob', 'rational_polynomial', 'equidistant', '']),
                        odd),

@@ -11,7 +11,7 @@ from pattern_locator.vision.camera import (camera_from_calibration, camera_from_
 import pytest
 import yaml
 
-FUZZ = settings(max_examples=150, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=80, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow])
 VGA_K = [[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]]
 
@@ -242,7 +242,7 @@ def test_any_calibration_gives_a_valid_camera_or_a_camera_error(
     assert np.allclose(back, corners, atol=0.5)
 
 
-@FUZZ
+@settings(FUZZ, max_examples=40)
 @given(width=st.integers(64, 4000), aspect=st.floats(0.5, 1.0), hfov=st.floats(5.0, 90.0),
        ratio=st.floats(0.95, 1.05), centre=st.tuples(st.floats(-0.1, 0.1),
                                                      st.floats(-0.1, 0.1)),
@@ -256,7 +256,7 @@ def test_plausible_calibrations_are_accepted(width, aspect, hfov, ratio, centre,
     assert camera.fx == fx
 
 
-@FUZZ
+@settings(FUZZ, max_examples=40)
 @given(key=st.sampled_from(['image_width', 'image_height', 'camera_name', 'camera_matrix',
                             'distortion_model', 'distortion_coefficients',
                             'rectification_matrix', 'projection_matrix']),

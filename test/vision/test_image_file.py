@@ -13,7 +13,7 @@ from pattern_locator.vision import image_file
 from pattern_locator.vision.image_file import read_header, read_image
 import pytest
 
-FUZZ = settings(max_examples=200, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=120, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.too_slow,
                                        HealthCheck.function_scoped_fixture])
 RNG = np.random.default_rng(3)

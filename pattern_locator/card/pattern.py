@@ -320,4 +320,8 @@ def load_pattern_config(path: Optional[Union[str, Path]] = None) -> PatternConfi
     """Load a pattern YAML (default: the shipped ``config/pattern.yaml``)."""
     path = Path(path) if path is not None else config_path('pattern.yaml')
     data = read_yaml(path, 'pattern configuration')
-    return pattern_config_from_dict(data, str(path))
+    try:
+        return pattern_config_from_dict(data, str(path))
+    except (TypeError, ValueError, OverflowError) as exc:
+        # A value of the wrong type where a number or a list is expected.
+        raise ConfigError(f'{path}: invalid pattern configuration ({str(exc)[:80]})') from None

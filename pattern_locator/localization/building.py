@@ -21,14 +21,17 @@ import re
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
-import yaml
 
 from ..card.pattern import Code, Ids, load_pattern_config, PatternConfig
 from ..errors import CodeError, ConfigError, PrintError
-from ..resources import config_path, read_yaml
+from ..resources import config_path, read_yaml, UniqueKeyLoader
 from ..vision.geometry import Pose, rotation_from_quaternion
 
 DEFAULT_FRAME = 'building'
+# A map of every card the shipped code has (12 floors x 81 rooms x 9 cards)
+# is ~1 MB and ~150k YAML values; PyYAML reads ~20k values a second.
+MAX_MAP_BYTES = 4 * 1024 * 1024
+MAX_MAP_VALUES = 500_000
 TOLERANCE = 1e-6          # unit quaternion / orthonormal rotation, as the file must give them
 ORIENTATIONS = ('rpy_deg', 'quaternion', 'rotation', 'facing_deg')
 CARD_FORMATS = ('pdf', 'svg', 'png')
@@ -176,24 +179,6 @@ class BuildingMap:
 # Loading ----------------------------------------------------------------------
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """A safe loader that refuses a key given twice in one mapping (PyYAML keeps the last)."""
-
-    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            try:
-                duplicate = key in seen
-                seen.add(key)
-            except TypeError:
-                continue            # unhashable key: the base class reports it
-            if duplicate:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key!r}', key_node.start_mark)
-        return super().construct_mapping(node, deep)
-
-
 def load_building(path: Optional[Union[str, Path]] = None,
                   pattern: Optional[PatternConfig] = None) -> BuildingMap:
     """
@@ -205,7 +190,8 @@ def load_building(path: Optional[Union[str, Path]] = None,
     """
     path = Path(path) if path is not None else config_path('building.yaml')
     pattern = pattern if pattern is not None else load_pattern_config()
-    data = read_yaml(path, 'the building map', loader=_UniqueKeyLoader)
+    data = read_yaml(path, 'the building map', loader=UniqueKeyLoader,
+                     max_bytes=MAX_MAP_BYTES, max_nodes=MAX_MAP_VALUES)
     return building_from_dict(data, pattern, str(path))
 
 

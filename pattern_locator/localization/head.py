@@ -33,6 +33,7 @@ is configured (:func:`head_angles`).
 import bisect
 from dataclasses import dataclass, field
 import math
+import numbers
 import threading
 from typing import List, Optional, Sequence, Tuple
 
@@ -44,6 +45,10 @@ from ..vision.geometry import Pose, skew
 # EVI-D31 travel (visca.md): pan +-100 deg, tilt +-25 deg.
 EVI_D31_PAN_LIMITS_RAD = (-math.radians(100.0), math.radians(100.0))
 EVI_D31_TILT_LIMITS_RAD = (-math.radians(25.0), math.radians(25.0))
+# Joint states may be this far outside the travel (encoder and rounding
+# slack); beyond it they are refused, never stored or used.
+JOINT_MARGIN_RAD = math.radians(5.0)
+MAX_JOINTS = 256              # names in one JointState: a head has a handful
 
 # camera_optical_frame axes in camera_tilt_link (columns): rpy (-pi/2, 0, -pi/2).
 R_TILT_OPTICAL = np.array([[0.0, 0.0, 1.0],
@@ -276,11 +281,17 @@ class JointStateBuffer:
     """
 
     def __init__(self, history_s: float = 2.0, max_gap_s: float = 0.25,
-                 max_age_s: float = 0.5):
+                 max_age_s: float = 0.5, head: Optional['HeadGeometry'] = None,
+                 margin_rad: float = JOINT_MARGIN_RAD):
         for name, value in (('history_s', history_s), ('max_gap_s', max_gap_s),
                             ('max_age_s', max_age_s)):
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigError(f'joint state buffer: {name} must be > 0, got {value!r}')
+        if not (math.isfinite(margin_rad) and margin_rad >= 0.0):
+            raise ConfigError(f'joint state buffer: margin_rad must be >= 0, got '
+                              f'{margin_rad!r}')
+        self.head = head if head is not None else HeadGeometry()
+        self.margin_rad = float(margin_rad)
         self.history_s = float(history_s)
         self.max_gap_s = float(max_gap_s)
         self.max_age_s = float(max_age_s)
@@ -305,11 +316,20 @@ class JointStateBuffer:
             return (self._stamps[-1],) + self._angles[-1]
 
     def add(self, stamp_s: float, pan: float, tilt: float) -> None:
-        """Insert a sample in stamp order (a sample with an existing stamp replaces it)."""
-        stamp_s, pan, tilt = float(stamp_s), float(pan), float(tilt)
+        """
+        Insert a sample in stamp order (a sample with an existing stamp replaces it).
+
+        HeadStateError, and nothing stored, for a value that is not finite or
+        angles outside the head's travel plus ``margin_rad``.
+        """
+        try:
+            stamp_s, pan, tilt = float(stamp_s), float(pan), float(tilt)
+        except (TypeError, ValueError, OverflowError):
+            raise HeadStateError('joint state values must be numbers') from None
         if not all(math.isfinite(v) for v in (stamp_s, pan, tilt)):
             raise HeadStateError(f'joint state not finite: stamp {stamp_s}, pan {pan}, '
                                  f'tilt {tilt}')
+        check_travel(self.head, pan, tilt, self.margin_rad)
         with self._lock:
             i = bisect.bisect_left(self._stamps, stamp_s)
             if i < len(self._stamps) and self._stamps[i] == stamp_s:
@@ -358,25 +378,71 @@ class JointStateBuffer:
             return p0 + w * (p1 - p0), a0 + w * (a1 - a0)
 
 
+def check_travel(head: HeadGeometry, pan: float, tilt: float,
+                 margin_rad: float = JOINT_MARGIN_RAD) -> None:
+    """Raise HeadStateError unless both angles are within the travel plus ``margin_rad``."""
+    for joint, value, (low, high) in (('pan', pan, head.pan_limits_rad),
+                                      ('tilt', tilt, head.tilt_limits_rad)):
+        if not low - margin_rad <= value <= high + margin_rad:
+            raise HeadStateError(
+                f'{joint} {math.degrees(value):.6g} deg is outside the head travel '
+                f'{math.degrees(low):.4g}..{math.degrees(high):.4g} deg (margin '
+                f'{math.degrees(margin_rad):.3g} deg)')
+
+
 def angles_from_joint_state(names: Sequence[str], positions: Sequence[float],
-                            pan_joint: str = 'camera_pan',
-                            tilt_joint: str = 'camera_tilt') -> Tuple[float, float]:
-    """Return (pan, tilt) from a JointState's names and positions (radians)."""
-    names = list(names)
-    positions = list(positions)
+                            pan_joint: str = 'camera_pan', tilt_joint: str = 'camera_tilt',
+                            head: Optional[HeadGeometry] = None,
+                            margin_rad: float = JOINT_MARGIN_RAD) -> Tuple[float, float]:
+    """
+    Return (pan, tilt) from a JointState's names and positions (radians).
+
+    HeadStateError, naming the problem in one line, when the message is not
+    one to trust: names not unique (which one is meant?), a name that is not
+    text, as many positions as names, a position that is not a finite
+    number, a joint missing, angles outside ``head``'s travel (default: the
+    EVI-D31's) plus ``margin_rad``.
+    """
+    try:
+        names = list(names)
+        positions = list(positions)
+    except TypeError:
+        raise HeadStateError('joint_states name and position must be sequences') from None
+    if len(names) > MAX_JOINTS:
+        raise HeadStateError(f'joint_states has {len(names)} names (more than {MAX_JOINTS})')
     if len(positions) != len(names):
         raise HeadStateError(f'joint_states has {len(names)} names but {len(positions)} '
                              'positions')
+    if not all(isinstance(name, str) for name in names):
+        raise HeadStateError('joint_states names must be text')
+    index = {}
+    for i, name in enumerate(names):
+        if name in index:
+            raise HeadStateError(f'joint_states names {_quote(name)} twice (positions '
+                                 f'{index[name]} and {i}): which one is meant is unknown')
+        index[name] = i
     result = []
     for joint in (pan_joint, tilt_joint):
-        if joint not in names:
-            raise HeadStateError(f'joint {joint!r} missing from joint_states (names: '
-                                 f'{names})')
-        value = float(positions[names.index(joint)])
+        if joint not in index:
+            shown = _quote(', '.join(names))
+            raise HeadStateError(f'joint {joint!r} missing from joint_states (names: {shown})')
+        value = positions[index[joint]]
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise HeadStateError(f'joint {joint!r} position is not a number '
+                                 f'({type(value).__name__})')
+        value = float(value)
         if not math.isfinite(value):
             raise HeadStateError(f'joint {joint!r} position is not a number ({value})')
         result.append(value)
+    check_travel(head if head is not None else HeadGeometry(), result[0], result[1],
+                 margin_rad)
     return result[0], result[1]
+
+
+def _quote(text: str) -> str:
+    """Return foreign text quoted and cut to ~80 characters for a log line."""
+    shown = repr(text)
+    return shown if len(shown) <= 80 else shown[:77] + '...'
 
 
 def head_angles(stamp_s: float, buffer: Optional[JointStateBuffer],

@@ -5,17 +5,24 @@ For each image: find the cards, estimate the camera pose from each with
 what the robot knows (the head's angles give "up" and the camera's height,
 the last fix gives continuity), look the card up in the building map, and
 compose the base pose: ``T_frame_base = T_frame_card T_card_camera
-T_camera_base(pan, tilt)``. Several cards in view: the paper's rule (the
-biggest complete card) or a covariance-weighted fusion of all of them.
+T_camera_base(pan, tilt)``. Each card's fix must pass the plausibility
+gates (:mod:`.gates`: finite, positive definite, camera in front of the
+card, base on the floor of its room); several cards in view: the paper's
+rule (the biggest complete card) or a covariance-weighted fusion of them.
+Given the image's stamp, the fix must also be continuous with the last one
+(a jump waits for a second agreeing image). A :class:`FrameResult` without
+a fix says why (``no_fix_reason``) and which gates refused what
+(``rejections``); :meth:`RobotLocalizer.rejection_counts` counts them.
 """
 
 from dataclasses import dataclass
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .building import BuildingMap, MappedCard
+from .gates import BaseMotion, FixGates, GateParameters, Rejection
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, up_in_camera
 from ..card.pattern import Ids, PatternConfig
 from ..errors import CodeError, ConfigError
@@ -54,6 +61,10 @@ class FrameResult:
     problems: Tuple[str, ...]
     target: Optional[Tuple[float, float, float]]   # pan, tilt, size of the biggest card seen
     detections: Tuple[CardDetection, ...] = ()
+    # Reasons (gates.REASONS) of the gates that refused a fix in this image.
+    rejections: Tuple[str, ...] = ()
+    # Without a fix: why, in one line ('' when there is a fix).
+    no_fix_reason: str = ''
 
 
 class RobotLocalizer:
@@ -63,7 +74,7 @@ class RobotLocalizer:
                  estimator: str = 'exact', output_frame: str = 'room',
                  fusion: str = 'biggest', min_tilt_deg: float = 0.0,
                  max_reprojection_px: float = 1.5, camera_height_sigma: float = 0.15,
-                 up_sigma_deg: float = 5.0):
+                 up_sigma_deg: float = 5.0, gates: Optional[GateParameters] = None):
         if output_frame not in OUTPUT_FRAMES:
             raise ConfigError(f'output frame must be one of {", ".join(OUTPUT_FRAMES)}, '
                               f'got {output_frame!r}')
@@ -78,16 +89,41 @@ class RobotLocalizer:
         self.max_reprojection_px = max_reprojection_px
         self.camera_height_sigma = camera_height_sigma
         self.up_sigma = math.radians(up_sigma_deg)
+        self.gates = FixGates(building, gates)
         self.last_fix: Optional[RobotFix] = None
 
-    def process(self, image: np.ndarray, camera: CameraModel, pan: float, tilt: float
+    def rejection_counts(self) -> Dict[str, int]:
+        """Return how many fixes each gate refused so far (every reason of gates.REASONS)."""
+        return self.gates.counts()
+
+    @property
+    def last_fix_stamp(self) -> Optional[float]:
+        """Return the stamp of the last fix returned: odometry is measured from it."""
+        return self.gates.last_stamp
+
+    def reset(self) -> None:
+        """Forget the last fix (continuity and the pose prior start over)."""
+        self.gates.reset()
+        self.last_fix = None
+
+    def process(self, image: np.ndarray, camera: CameraModel, pan: float, tilt: float,
+                stamp_s: Optional[float] = None, odometry: Optional[BaseMotion] = None
                 ) -> FrameResult:
-        """Locate the robot in one image taken with the head at ``pan``, ``tilt`` (rad)."""
+        """
+        Locate the robot in one image taken with the head at ``pan``, ``tilt`` (rad).
+
+        ``stamp_s``: the image's time (seconds); without it the continuity
+        gate is off (nothing to judge motion by) and every fix that passes
+        the static gates is returned. ``odometry``: the base's motion since
+        :attr:`last_fix_stamp`, for the continuity gate (else the maximum
+        speed and yaw rate of the gate parameters bound the motion).
+        """
         detections = sorted(self.locator.detector.detect(image, camera),
                             key=lambda d: -d.size_px)
         problems: List[str] = []
+        rejections: List[str] = []
         target = None
-        candidates = []
+        fixes: List[RobotFix] = []
         T_base_camera = self.head.T_base_camera(pan, tilt)
         for det in detections:
             if target is None:
@@ -111,19 +147,43 @@ class RobotLocalizer:
                                 f'{located.reprojection_rms_px:.2f} px above the limit '
                                 f'{self.max_reprojection_px:.2f} px')
                 continue
-            candidates.append((det, mapped, located))
-        if not candidates:
+            fix, rejection = self._fix(det, mapped, located, pan, tilt)
+            if rejection is not None:
+                problems.append(f'card {det.code}: {rejection.message}')
+                rejections.append(rejection.reason)
+                continue
+            fixes.append(fix)
+
+        def without_fix(reason: str) -> FrameResult:
             return FrameResult(None, len(detections), tuple(problems), target,
-                               tuple(detections))
-        fixes = [self._fix(det, mapped, located, pan, tilt)
-                 for det, mapped, located in candidates]
+                               tuple(detections), tuple(rejections), reason)
+
+        if not fixes:
+            return without_fix(problems[0] if problems else 'no card seen')
         if self.fusion == 'fused' and len(fixes) > 1:
             fix = _fuse(fixes)
+            rejection = self.gates.check(fix.T_frame_base, fix.covariance, fix.frame_id,
+                                         self._room(fix))
+            if rejection is not None:
+                problems.append(f'fused fix: {rejection.message}')
+                rejections.append(rejection.reason)
+                return without_fix(problems[-1])
         else:
             # The paper's rule: the biggest complete card (detections are biggest first).
             fix = fixes[0]
+        rejection = self.gates.check_continuity(fix.T_frame_base, fix.covariance, fix.frame_id,
+                                                stamp_s, odometry)
+        if rejection is not None:
+            problems.append(rejection.message)
+            rejections.append(rejection.reason)
+            return without_fix(rejection.message)
         self.last_fix = fix
-        return FrameResult(fix, len(detections), tuple(problems), target, tuple(detections))
+        return FrameResult(fix, len(detections), tuple(problems), target, tuple(detections),
+                           tuple(rejections))
+
+    def _room(self, fix: RobotFix):
+        """Return the room of the card a fix came from."""
+        return self.building.room(fix.ids.floor, fix.ids.room)
 
     def _prior(self, mapped: MappedCard, T_base_camera: Pose, pan: float, tilt: float
                ) -> Optional[PosePrior]:
@@ -144,18 +204,27 @@ class RobotLocalizer:
                          height_sigma=self.camera_height_sigma,
                          previous_camera_in_pattern=previous)
 
-    def _fix(self, det, mapped: MappedCard, located, pan: float, tilt: float) -> RobotFix:
+    def _fix(self, det, mapped: MappedCard, located, pan: float, tilt: float
+             ) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
+        """Return the base's fix from one card and why the gates refuse it (or None)."""
         T_camera_card = located.T_camera_pattern
         if self.output_frame == 'room':
             T_frame_card, frame_id = mapped.T_room_card, mapped.room_frame
         else:
             T_frame_card, frame_id = mapped.T_building_card, self.building.frame
         T_frame_base = base_pose_from_camera(T_frame_card, T_camera_card, self.head, pan, tilt)
-        covariance = covariance_to_base(located.covariance, T_frame_card, T_camera_card,
-                                        self.head, pan, tilt)
+        covariance = None
+        if located.covariance is not None and np.shape(located.covariance) == (6, 6):
+            with np.errstate(all='ignore'):
+                covariance = covariance_to_base(located.covariance, T_frame_card,
+                                                T_camera_card, self.head, pan, tilt)
+        room = self.building.room(mapped.ids.floor, mapped.ids.room)
+        rejection = self.gates.check(T_frame_base, covariance, frame_id, room, T_camera_card)
+        if rejection is not None:
+            return None, rejection
         pan_to, tilt_to = _head_motion_from_pose(T_camera_card)
         return RobotFix(det.ids, frame_id, T_frame_base, covariance, T_camera_card, pan_to,
-                        tilt_to, det.size_px, float(located.ambiguity or math.inf), 1)
+                        tilt_to, det.size_px, float(located.ambiguity or math.inf), 1), None
 
 
 def _head_motion(camera: CameraModel, centre_px: np.ndarray) -> Tuple[float, float]:

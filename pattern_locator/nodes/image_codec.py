@@ -13,14 +13,18 @@ high byte). For bgr8, mono8, 8UC3 and 8UC1 the result is a view of ``data``
 ``data`` does, so copy it before drawing on it.
 """
 
+import array
+import collections
 import operator
-from typing import Any, Dict, Tuple
+import threading
+from typing import Any, Dict, Optional, Tuple
 
 import cv2
 import numpy as np
 
-from ..errors import ImageError
-from ..vision.camera import CameraModel
+from ..errors import CameraError, ImageError
+from ..resources import quote
+from ..vision.camera import camera_from_calibration, CameraModel, MAX_IMAGE_SIDE, NAME_CHARS
 
 # Bytes per pixel of each encoding the decoder reads (the bytes in one row of
 # ``width`` pixels is ``width * bpp``; YUV 4:2:2 is 2 bytes per pixel on average).
@@ -66,6 +70,11 @@ _YUV_CODES: Dict[str, int] = {
 _MSG_FIELDS = ('height', 'width', 'encoding', 'is_bigendian', 'step', 'data')
 
 
+def _short(number: int) -> str:
+    """Return an integer for a message, at most ~20 characters."""
+    return str(number) if abs(number) < 10 ** 18 else f'(an integer of {number.bit_length()} bits)'
+
+
 def _as_int(value: Any, name: str) -> int:
     """Return ``value`` as an int, or raise ImageError if it is not an integer."""
     if isinstance(value, bool):
@@ -85,9 +94,15 @@ def _as_bytes(data: Any) -> np.ndarray:
     if isinstance(data, (list, tuple)):
         # rclpy never gives these, but a hand-built message may.
         try:
-            return np.array(data, dtype=np.uint8)
-        except (OverflowError, TypeError, ValueError) as exc:
-            raise ImageError(f'image data must be a sequence of bytes 0..255: {exc}') from None
+            values = np.array(data)
+        except (OverflowError, TypeError, ValueError):
+            values = None
+        if values is not None and values.size == 0:
+            return np.zeros(0, np.uint8)
+        if (values is None or values.ndim != 1 or values.dtype.kind not in 'iu'
+                or values.min() < 0 or values.max() > 255):
+            raise ImageError('image data must be a flat sequence of integers 0..255')
+        return values.astype(np.uint8)
     try:
         view = memoryview(data)
     except TypeError:
@@ -95,12 +110,18 @@ def _as_bytes(data: Any) -> np.ndarray:
                          f"array.array('B'), got {type(data).__name__}") from None
     if not view.c_contiguous:
         raise ImageError('image data must be a contiguous buffer')
+    if view.nbytes == 0:
+        return np.zeros(0, np.uint8)
     # Casting to 'B' reads any buffer (e.g. array.array('H')) as its raw bytes.
-    return np.frombuffer(view.cast('B') if view.format != 'B' else view, dtype=np.uint8)
+    try:
+        flat = view.cast('B') if view.format != 'B' or view.ndim != 1 else view
+    except (TypeError, ValueError) as exc:
+        raise ImageError(f'image data cannot be read as bytes: {exc}') from None
+    return np.frombuffer(flat, dtype=np.uint8)
 
 
 def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                 data: Any) -> np.ndarray:
+                 data: Any, max_pixels: Optional[int] = None) -> np.ndarray:
     """
     Return the image held by a ``sensor_msgs/Image``'s fields as a numpy array.
 
@@ -108,23 +129,31 @@ def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step
     uint8 (H, W); mono16 keeps its high byte. ``data`` may be bytes,
     bytearray, memoryview or array.array('B') (what rclpy gives); it is read
     without a copy. Bytes past ``width * bytes_per_pixel`` in each row of
-    ``step`` bytes are padding and ignored. Raise ImageError, with one line
-    naming the problem, for anything that cannot be decoded exactly.
+    ``step`` bytes are padding and ignored. ``max_pixels``: refuse a larger
+    ``width * height`` before touching the data. Raise ImageError, with one
+    line naming the problem, for anything that cannot be decoded exactly.
     """
     if not isinstance(encoding, str):
         raise ImageError(f'encoding must be a string, got {type(encoding).__name__}')
     bpp = _BYTES_PER_PIXEL.get(encoding)
     if bpp is None:
-        raise ImageError(f'unsupported image encoding {encoding!r}; supported: '
+        raise ImageError(f'unsupported image encoding {quote(encoding)}; supported: '
                          + ', '.join(SUPPORTED_ENCODINGS))
     height = _as_int(height, 'height')
     width = _as_int(width, 'width')
     step = _as_int(step, 'step')
+    if isinstance(is_bigendian, bool):
+        is_bigendian = int(is_bigendian)
+    is_bigendian = _as_int(is_bigendian, 'is_bigendian')
     if height <= 0 or width <= 0:
-        raise ImageError(f'image size must be positive, got {width}x{height} (width x height)')
+        raise ImageError(f'image size must be positive, got {_short(width)}x{_short(height)} '
+                         '(width x height)')
+    if max_pixels is not None and width * height > max_pixels:
+        raise ImageError(f'image of {_short(width)}x{_short(height)} pixels is larger than the '
+                         f'limit of {max_pixels} pixels')
     row_bytes = width * bpp
     if step < row_bytes:
-        raise ImageError(f'step {step} is smaller than width * bytes per pixel = '
+        raise ImageError(f'step {_short(step)} is smaller than width * bytes per pixel = '
                          f'{width} * {bpp} = {row_bytes} for {encoding}')
     if encoding in _YUV_CODES and width % 2:
         raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
@@ -137,7 +166,8 @@ def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step
     # size fields do not describe the data, so any image read would be a guess.
     if buf.size != expected:
         raise ImageError(f'image data has {buf.size} bytes, expected height * step = '
-                         f'{height} * {step} = {expected} for {width}x{height} {encoding}')
+                         f'{height} * {_short(step)} = {_short(expected)} for '
+                         f'{width}x{height} {encoding}')
 
     rows = buf.reshape(height, step)[:, :row_bytes]
     if encoding == 'mono16':
@@ -208,14 +238,14 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     return height, width, encoding, 0, step, packed.tobytes()
 
 
-def image_from_msg(msg: Any) -> np.ndarray:
+def image_from_msg(msg: Any, max_pixels: Optional[int] = None) -> np.ndarray:
     """Return the image of a ``sensor_msgs/Image`` (see ``decode_image``)."""
     missing = [name for name in _MSG_FIELDS if not hasattr(msg, name)]
     if missing:
-        raise ImageError(f'not a sensor_msgs/Image ({type(msg).__name__}): missing field(s) '
-                         + ', '.join(missing))
+        raise ImageError(f'not a sensor_msgs/Image ({type(msg).__name__[:40]}): missing '
+                         'field(s) ' + ', '.join(missing))
     return decode_image(msg.height, msg.width, msg.encoding, msg.is_bigendian, msg.step,
-                        msg.data)
+                        msg.data, max_pixels)
 
 
 def fill_msg(msg: Any, image: np.ndarray, encoding: str = 'bgr8') -> None:
@@ -230,15 +260,136 @@ def fill_msg(msg: Any, image: np.ndarray, encoding: str = 'bgr8') -> None:
     msg.data = data
 
 
-def camera_from_info(msg) -> CameraModel:
-    """Build a CameraModel from a sensor_msgs/CameraInfo; CameraError if it is unusable."""
-    K = np.asarray(msg.k, dtype=float).reshape(3, 3)
-    model = msg.distortion_model or 'plumb_bob'
-    D = np.asarray(msg.d, dtype=float)
-    if not D.size:
-        model, D = 'none', np.zeros(5)
-    return CameraModel(int(msg.width), int(msg.height), K, D, model,
-                       msg.header.frame_id or 'camera')
+_INFO_FIELDS = ('width', 'height', 'distortion_model', 'd', 'k')
+
+
+_ODD = object()
+
+
+def _float_bytes(values: Any) -> Any:
+    """Return the bytes of a float64 array field (what rclpy gives), None, or _ODD."""
+    if values is None:
+        return None
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return values.tobytes()
+    if isinstance(values, array.array) and values.typecode == 'd':
+        return values.tobytes()
+    if isinstance(values, (list, tuple)) and len(values) <= 16 and all(
+            type(v) is float for v in values):
+        return np.array(values, dtype=np.float64).tobytes()
+    return _ODD
+
+
+def _info_key(msg: Any) -> Optional[tuple]:
+    """Return a hashable copy of a CameraInfo's intrinsics fields, or None if they are odd."""
+    try:
+        roi = getattr(msg, 'roi', None)
+        roi_key = None if roi is None else tuple(
+            int(getattr(roi, f)) for f in ('x_offset', 'y_offset', 'width', 'height'))
+        header = getattr(msg, 'header', None)
+        frame = getattr(header, 'frame_id', '')
+        arrays = tuple(_float_bytes(getattr(msg, f, None)) for f in ('k', 'd', 'r', 'p'))
+        if any(a is _ODD for a in arrays):
+            return None
+        fields = (msg.width, msg.height, msg.distortion_model, getattr(msg, 'binning_x', 0),
+                  getattr(msg, 'binning_y', 0), frame)
+        if not all(type(v) in (int, str) for v in fields):
+            return None
+        return fields + arrays + (roi_key,)
+    except (AttributeError, TypeError, ValueError, OverflowError):
+        return None
+
+
+_camera_cache: 'collections.OrderedDict[tuple, CameraModel]' = collections.OrderedDict()
+_camera_cache_lock = threading.Lock()
+CAMERA_CACHE_SIZE = 8
+
+
+def camera_from_info(msg: Any) -> CameraModel:
+    """
+    Return the CameraModel of a ``sensor_msgs/CameraInfo``; CameraError if it is unusable.
+
+    The calibration (width, height, K, D, R, P) is for the whole sensor and
+    goes through :func:`~..vision.camera.camera_from_calibration`; the model
+    returned is for the images that come with it: the region of interest
+    ``roi`` (when its width and height are non-zero) and then binned by
+    ``binning_x``, ``binning_y`` (0 = 1), as image_geometry reads them. An
+    empty ``d`` means no distortion. The camera's name is
+    ``header.frame_id``, cut to 80 characters. Repeated messages with the
+    same fields are validated once (a small cache), since camera_info comes
+    with every image.
+    """
+    key = _info_key(msg)
+    if key is not None:
+        with _camera_cache_lock:
+            cached = _camera_cache.get(key)
+            if cached is not None:
+                _camera_cache.move_to_end(key)
+                return cached
+    camera = _camera_from_info(msg)
+    if key is not None:
+        with _camera_cache_lock:
+            _camera_cache[key] = camera
+            while len(_camera_cache) > CAMERA_CACHE_SIZE:
+                _camera_cache.popitem(last=False)
+    return camera
+
+
+def _camera_from_info(msg: Any) -> CameraModel:
+    missing = [f for f in _INFO_FIELDS if not hasattr(msg, f)]
+    if missing:
+        raise CameraError(f'not a sensor_msgs/CameraInfo ({type(msg).__name__[:40]}): missing '
+                          'field(s) ' + ', '.join(missing))
+    frame = getattr(getattr(msg, 'header', None), 'frame_id', '')
+    name = frame[:NAME_CHARS] if isinstance(frame, str) and frame else 'camera'
+    model = msg.distortion_model
+    try:
+        no_distortion = len(msg.d) == 0
+    except TypeError:
+        no_distortion = False           # camera_from_calibration names the problem
+    if no_distortion:
+        model = 'none'
+    elif model == '':
+        model = 'plumb_bob'
+    full = camera_from_calibration(msg.width, msg.height, msg.k, msg.d, model,
+                                   getattr(msg, 'r', None), getattr(msg, 'p', None),
+                                   'camera_info', name)
+    x0, y0, width, height = 0, 0, full.width, full.height
+    roi = getattr(msg, 'roi', None)
+    if roi is not None:
+        values = [_camera_int(getattr(roi, f, 0), f'roi.{f}')
+                  for f in ('x_offset', 'y_offset', 'width', 'height')]
+        if values[2] and values[3]:
+            x0, y0, width, height = values
+            if x0 + width > full.width or y0 + height > full.height:
+                raise CameraError(f'camera_info: roi {width}x{height} at ({x0}, {y0}) is not '
+                                  f'inside the {full.width}x{full.height} image')
+    bx, by = (max(1, _camera_int(getattr(msg, f, 0), f)) for f in ('binning_x', 'binning_y'))
+    if (x0, y0, width, height, bx, by) == (0, 0, full.width, full.height, 1, 1):
+        return full
+    if width // bx < 1 or height // by < 1:
+        raise CameraError(f'camera_info: binning {bx}x{by} leaves no pixel of the '
+                          f'{width}x{height} image')
+    K = full.K.copy()
+    K[0, 2] -= x0
+    K[1, 2] -= y0
+    K[0] /= bx
+    K[1] /= by
+    return CameraModel(width // bx, height // by, K, full.D, full.distortion_model, full.name)
+
+
+def _camera_int(value: Any, name: str) -> int:
+    if isinstance(value, bool):
+        raise CameraError(f'camera_info: {name} must be an integer, got {value!r}')
+    try:
+        number = operator.index(value)
+    except TypeError:
+        raise CameraError(f'camera_info: {name} must be an integer, got '
+                          f'{type(value).__name__}') from None
+    if not 0 <= number <= MAX_IMAGE_SIDE:
+        raise CameraError(f'camera_info: {name} = {number} is out of range '
+                          f'(0..{MAX_IMAGE_SIDE})')
+    return number
 
 
 def fill_camera_info(msg, camera: CameraModel) -> None:

@@ -1,7 +1,9 @@
 """Pan/tilt head kinematics, base pose from the camera pose, joint state matching."""
 
+import array
 import math
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 from pattern_locator.errors import ConfigError, PatternLocatorError
 from pattern_locator.localization.head import (angles_from_joint_state, base_pose_from_camera,
@@ -364,7 +366,7 @@ def test_buffer_out_of_order_and_duplicates():
     assert len(buf) == 3
     assert buf.at(10.1) == pytest.approx((0.1, 0.3))
     assert buf.at(10.15) == pytest.approx((0.15, 0.15))
-    buf.add(5.0, 1.0, 1.0)                       # older than the history: dropped
+    buf.add(5.0, 1.0, 0.4)                       # older than the history: dropped
     assert len(buf) == 3
     buf.clear()
     with pytest.raises(HeadStateError, match='no joint states received'):
@@ -387,8 +389,9 @@ def test_buffer_rejects_bad_values():
 def test_angles_from_joint_state():
     names = ['camera_zoom', 'camera_tilt', 'camera_pan']
     assert angles_from_joint_state(names, [300.0, -0.1, 0.4]) == (0.4, -0.1)
-    assert angles_from_joint_state(['p', 't'], [1.0, 2.0], pan_joint='p',
-                                   tilt_joint='t') == (1.0, 2.0)
+    assert angles_from_joint_state(['p', 't'], [1.0, 0.2], pan_joint='p',
+                                   tilt_joint='t') == (1.0, 0.2)
+    assert angles_from_joint_state(array_names(), array.array('d', [0.1, 0.2])) == (0.1, 0.2)
     with pytest.raises(HeadStateError, match="joint 'camera_tilt' missing"):
         angles_from_joint_state(['camera_pan'], [0.0])
     with pytest.raises(HeadStateError, match="joint 'camera_pan' missing"):
@@ -397,6 +400,101 @@ def test_angles_from_joint_state():
         angles_from_joint_state(['camera_pan', 'camera_tilt'], [float('nan'), 0.0])
     with pytest.raises(HeadStateError, match='2 names but 1 positions'):
         angles_from_joint_state(['camera_pan', 'camera_tilt'], [0.0])
+
+
+def array_names():
+    return ['camera_pan', 'camera_tilt']
+
+
+def test_duplicate_joint_names_are_refused():
+    # Seen: duplicate names, the first one used, a pose 0.31 m and 30 deg off.
+    names = ['camera_pan', 'camera_tilt', 'camera_pan']
+    with pytest.raises(HeadStateError, match="names 'camera_pan' twice"):
+        angles_from_joint_state(names, [0.0, 0.1, 0.5])
+    # Any joint named twice makes the message untrustworthy.
+    with pytest.raises(HeadStateError, match="names 'camera_zoom' twice"):
+        angles_from_joint_state(['camera_zoom', 'camera_pan', 'camera_tilt', 'camera_zoom'],
+                                [1.0, 0.0, 0.0, 2.0])
+
+
+@pytest.mark.parametrize('pan, tilt, words', [
+    # Seen: pan = 1e6 rad accepted; a driver's malformed replies gave pan
+    # -65 rad and 113.6 deg, tilt 33 deg.
+    (1e6, 0.0, 'pan 5.72958e\\+07 deg is outside'),
+    (-65.0, 0.0, 'pan'),
+    (math.radians(113.6), 0.0, 'pan 113.6 deg'),
+    (0.0, math.radians(33.0), 'tilt 33 deg is outside the head travel -25..25 deg'),
+])
+def test_angles_outside_the_travel_are_refused(pan, tilt, words):
+    with pytest.raises(HeadStateError, match=words):
+        angles_from_joint_state(['camera_pan', 'camera_tilt'], [pan, tilt])
+    buf = JointStateBuffer()
+    with pytest.raises(HeadStateError, match=words):
+        buf.add(1.0, pan, tilt)
+    assert len(buf) == 0
+
+
+def test_travel_margin_and_a_wider_head():
+    edge = math.radians(100.0 + 4.9)
+    assert angles_from_joint_state(array_names(), [edge, 0.0])[0] == edge
+    with pytest.raises(HeadStateError):
+        angles_from_joint_state(array_names(), [edge, 0.0], margin_rad=0.0)
+    wide = HeadGeometry(pan_limits_rad=(-3.0, 3.0), tilt_limits_rad=(-1.5, 1.5))
+    assert angles_from_joint_state(array_names(), [2.9, 1.4], head=wide) == (2.9, 1.4)
+    buf = JointStateBuffer(head=wide)
+    buf.add(1.0, 2.9, 1.4)
+    assert buf.at(1.0) == (2.9, 1.4)
+
+
+@pytest.mark.parametrize('names, positions, words', [
+    ([1, 2], [0.0, 0.0], 'names must be text'),
+    (['camera_pan', 'camera_tilt'], ['0.1', 0.0], 'not a number'),
+    (['camera_pan', 'camera_tilt'], [True, 0.0], 'not a number'),
+    (['x' * 500] * 2, [0.0, 0.0], 'twice'),
+    (['j%d' % i for i in range(1000)], [0.0] * 1000, 'more than 256'),
+    (None, [], 'must be sequences'),
+])
+def test_malformed_joint_states_are_one_line_errors(names, positions, words):
+    with pytest.raises(HeadStateError, match=words) as error:
+        angles_from_joint_state(names, positions)
+    assert '\n' not in str(error.value) and len(str(error.value)) < 250
+
+
+JOINT_NAMES = st.sampled_from(['camera_pan', 'camera_tilt', 'camera_zoom', '', 'x'])
+POSITIONS = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.floats(-2.0, 2.0),
+                      st.integers(-10, 10), st.booleans(), st.none(), st.text(max_size=2))
+
+
+@settings(max_examples=100, deadline=None, derandomize=True, database=None)
+@given(names=st.lists(JOINT_NAMES, max_size=5), positions=st.lists(POSITIONS, max_size=5))
+def test_any_joint_state_gives_angles_within_travel_or_a_head_state_error(names, positions):
+    try:
+        pan, tilt = angles_from_joint_state(names, positions)
+    except HeadStateError as exc:
+        assert '\n' not in str(exc)
+        return
+    assert len(set(names)) == len(names) and len(names) == len(positions)
+    assert positions[names.index('camera_pan')] == pan
+    assert HEAD.within_limits(pan, tilt, tolerance_rad=math.radians(5.0))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, database=None)
+@given(samples=st.lists(st.tuples(st.floats(0.0, 3.0), POSITIONS, POSITIONS), max_size=20),
+       stamps=st.lists(st.floats(-1.0, 5.0), max_size=5))
+def test_the_buffer_never_holds_or_gives_a_bad_angle(samples, stamps):
+    buf = JointStateBuffer()
+    for stamp, pan, tilt in samples:
+        try:
+            buf.add(stamp, pan, tilt)
+        except HeadStateError:
+            pass
+    for stamp in stamps:
+        try:
+            pan, tilt = buf.at(stamp)
+        except HeadStateError:
+            continue
+        assert math.isfinite(pan) and math.isfinite(tilt)
+        assert HEAD.within_limits(pan, tilt, tolerance_rad=math.radians(5.0))
 
 
 def test_head_angles_fixed_only_without_a_topic():

@@ -2,9 +2,11 @@
 
 import math
 
+import cv2
 import numpy as np
 from pattern_locator.errors import ConfigError
 from pattern_locator.localization.building import building_from_dict
+from pattern_locator.localization.gates import GateParameters, REASONS
 from pattern_locator.localization.localizer import RobotLocalizer
 from pattern_locator.vision.geometry import rotation_angle
 import pytest
@@ -119,3 +121,72 @@ def test_bad_settings_are_config_errors():
         localizer(output_frame='world')
     with pytest.raises(ConfigError, match='fusion'):
         localizer(fusion='average')
+
+
+# Gates, end to end ------------------------------------------------------------------
+
+def test_a_frame_rotated_180_degrees_gives_no_pose():
+    # Seen: a frame rotated 180 deg published a base 1.8 m above the floor,
+    # rolled -160 deg. It decodes and gives a pose; the roll gate refuses it.
+    T_room_base = base_pose(4.0, 1.2, 160.0)
+    pan, tilt = aim(T_room_base, BUILDING.card((0, 1, 1)).T_room_card.t)
+    image, _ = view(0, 1, T_room_base, pan, tilt)
+    loc = localizer()
+    result = loc.process(cv2.rotate(image, cv2.ROTATE_180), CAMERA, pan, tilt)
+    assert result.fix is None and result.cards_seen == 1
+    assert result.rejections == ('roll_pitch',)
+    assert 'base rolled' in result.no_fix_reason
+    assert loc.rejection_counts()['roll_pitch'] == 1
+    # Without the gates it would have been a pose well off the floor.
+    ungated = localizer(gates=GateParameters(max_roll_deg=180.0, max_pitch_deg=90.0,
+                                             max_base_height_m=5.0, footprint='off'))
+    fix = ungated.process(cv2.rotate(image, cv2.ROTATE_180), CAMERA, pan, tilt).fix
+    assert fix is not None and fix.T_frame_base.t[2] > 1.0
+
+
+def test_a_mirrored_card_is_never_located():
+    # Card 1 of floor 0 room 1 reads K-KRRRRRRR: the same code mirrored, as a
+    # card printed without a handedness mark. Its mirror image (a reflection,
+    # a flipped frame) puts the camera mirrored about the card's normal:
+    # 2.6 m from the truth here, plausible on its own. Continuity refuses it.
+    T_room_base = base_pose(4.0, 1.2, 160.0)
+    pan, tilt = aim(T_room_base, BUILDING.card((0, 1, 1)).T_room_card.t)
+    image, _ = view(0, 1, T_room_base, pan, tilt)
+    mirrored = np.ascontiguousarray(cv2.flip(image, 1))
+
+    def run(loc, frames):
+        out = []
+        for k, frame in enumerate(frames):
+            out.append(loc.process(frame, CAMERA, pan, tilt, stamp_s=10.0 + 0.1 * k))
+        return out
+
+    # The robot located, then a mirrored frame: held back as a jump; the
+    # next true frame is continuous with the last fix and returned.
+    loc = localizer()
+    results = run(loc, [image, image, mirrored, image])
+    assert [r.fix is None for r in results] == [True, False, True, False]
+    assert results[0].rejections == ('unconfirmed_first',)
+    assert results[2].rejections == ('jump',) and results[2].cards_seen == 1
+    assert 'held back' in results[2].no_fix_reason
+    for r in (results[1], results[3]):
+        assert np.linalg.norm(r.fix.T_frame_base.t - T_room_base.t) < 0.05
+    # A mirrored frame first: held; the true frames after it do not confirm
+    # it, so the mirrored pose is never returned.
+    loc = localizer()
+    results = run(loc, [mirrored, image, image])
+    assert [r.fix is None for r in results] == [True, True, False]
+    assert np.linalg.norm(results[2].fix.T_frame_base.t - T_room_base.t) < 0.05
+    counts = loc.rejection_counts()
+    assert set(counts) == set(REASONS) and counts['unconfirmed_first'] == 2
+
+
+def test_without_a_stamp_every_plausible_fix_is_returned():
+    # The locator node before it passes stamps: the static gates only.
+    T_room_base = base_pose(4.0, 1.2, 160.0)
+    pan, tilt = aim(T_room_base, BUILDING.card((0, 1, 1)).T_room_card.t)
+    image, _ = view(0, 1, T_room_base, pan, tilt)
+    loc = localizer()
+    first = loc.process(image, CAMERA, pan, tilt)
+    assert first.fix is not None and first.rejections == () and first.no_fix_reason == ''
+    assert loc.last_fix_stamp is None
+    assert sum(loc.rejection_counts().values()) == 0

@@ -8,13 +8,21 @@ reads a pattern or a byte order the wrong way round gets the colours wrong.
 """
 
 import array
+import math
+from types import SimpleNamespace
 
 import cv2
+from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
-from pattern_locator.errors import ImageError
-from pattern_locator.nodes.image_codec import (decode_image, encode_image, fill_msg,
-                                               image_from_msg, SUPPORTED_ENCODINGS)
+from pattern_locator.errors import CameraError, ImageError
+from pattern_locator.nodes.image_codec import (camera_from_info, decode_image, encode_image,
+                                               fill_camera_info, fill_msg, image_from_msg,
+                                               SUPPORTED_ENCODINGS)
+from pattern_locator.vision.camera import CameraModel
 import pytest
+
+FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.too_slow])
 
 H, W = 48, 64
 PATCH_H, PATCH_W = 12, 16          # even, so YUV pairs and Bayer blocks never straddle patches
@@ -392,3 +400,212 @@ def test_fill_msg_bad_image_leaves_message():
     with pytest.raises(ImageError):
         fill_msg(msg, GREY.astype(np.float64), 'mono8')
     np.testing.assert_array_equal(image_from_msg(msg), GREY)
+
+
+# Bounds and odd fields ----------------------------------------------------------
+
+def test_max_pixels_refuses_before_reading_the_data():
+    # The size fields alone say no: the data is not even looked at.
+    with pytest.raises(ImageError) as excinfo:
+        decode_image(100000, 100000, 'bgr8', 0, 300000, b'', max_pixels=4_000_000)
+    assert_one_line_error(excinfo, '100000x100000', 'limit of 4000000 pixels')
+    msg = SimpleNamespace(height=H, width=W, encoding='bgr8', is_bigendian=0, step=3 * W,
+                          data=SCENE.tobytes())
+    assert image_from_msg(msg, max_pixels=H * W).shape == (H, W, 3)
+    with pytest.raises(ImageError, match='limit'):
+        image_from_msg(msg, max_pixels=H * W - 1)
+
+
+def test_odd_field_types_are_image_errors():
+    with pytest.raises(ImageError, match='is_bigendian'):
+        decode_image(1, 1, 'mono16', np.array([1, 0]), 2, bytes(2))
+    # A boolean byte order is read as 0 / 1.
+    words = decode_image(1, 1, 'mono16', True, 2, bytes([0x12, 0x34]))
+    assert words[0, 0] == 0x12
+    with pytest.raises(ImageError):
+        decode_image(1, 2, 'mono8', 0, 2, array.array('d'))
+    with pytest.raises(ImageError, match='flat sequence'):
+        decode_image(1, 2, 'mono8', 0, 2, [1.5, 2.0])
+    with pytest.raises(ImageError, match='flat sequence'):
+        decode_image(1, 2, 'mono8', 0, 2, [True, False])
+    with pytest.raises(ImageError) as excinfo:
+        decode_image(2 ** 70, 1, 'mono8', 0, 1, b'\x00')
+    assert len(str(excinfo.value)) < 200
+    with pytest.raises(ImageError) as excinfo:
+        decode_image(1, 1, 'x' * 10000, 0, 1, b'\x00')
+    assert len(str(excinfo.value)) < 300
+
+
+BYTES_PER_PIXEL = {'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4, 'mono8': 1, 'mono16': 2,
+                   'yuv422': 2, 'yuv422_yuy2': 2, 'bayer_rggb8': 1, 'bayer_bggr8': 1,
+                   'bayer_gbrg8': 1, 'bayer_grbg8': 1, '8UC3': 3, '8UC1': 1}
+GREY_ENCODINGS = ('mono8', 'mono16', '8UC1')
+
+
+@st.composite
+def image_fields(draw):
+    """Fields of an Image message: often consistent, often a little off, sometimes odd."""
+    encoding = draw(st.one_of(st.sampled_from(sorted(BYTES_PER_PIXEL)),
+                              st.text(max_size=8), st.none(), st.integers()))
+    height = draw(st.one_of(st.integers(-2, 9), st.integers(), st.floats(), st.booleans()))
+    width = draw(st.one_of(st.integers(-2, 9), st.integers(), st.floats(), st.none()))
+    bpp = BYTES_PER_PIXEL.get(encoding, 1) if isinstance(encoding, str) else 1
+    row = width * bpp if isinstance(width, int) and 0 < width < 100 else 4
+    step = draw(st.one_of(st.just(row), st.integers(row - 2, row + 3), st.integers()))
+    rows = height if isinstance(height, int) and 0 < height < 100 else 1
+    size = step * rows if isinstance(step, int) and 0 <= step * rows < 10000 else 3
+    size = draw(st.one_of(st.just(size), st.integers(0, 64)))
+    raw = draw(st.binary(min_size=size, max_size=size))
+    data = draw(st.sampled_from(['bytes', 'array', 'list', 'numpy', 'words', 'text']))
+    if data == 'array':
+        raw = array.array('B', raw)
+    elif data == 'list':
+        raw = list(raw) + draw(st.lists(st.integers(-300, 300), max_size=2))
+    elif data == 'numpy':
+        raw = np.frombuffer(raw, np.uint8)
+    elif data == 'words':
+        raw = array.array('H', raw[:len(raw) // 2 * 2])
+    elif data == 'text':
+        raw = raw.decode('latin-1')
+    big = draw(st.one_of(st.integers(0, 1), st.booleans(), st.floats(), st.none()))
+    return height, width, encoding, big, step, raw
+
+
+@FUZZ
+@given(fields=image_fields())
+def test_any_image_fields_decode_to_their_shape_or_give_an_image_error(fields):
+    height, width, encoding, _, _, _ = fields
+    try:
+        image = decode_image(*fields, max_pixels=10000)
+    except ImageError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 400
+        return
+    assert image.dtype == np.uint8
+    if encoding in GREY_ENCODINGS:
+        assert image.shape == (height, width)
+    else:
+        assert image.shape == (height, width, 3)
+
+
+# camera_info ---------------------------------------------------------------------
+
+VGA = CameraModel.from_fov(640, 480, 60.0, D=[-0.1, 0.01, 0.0, 0.0, 0.0])
+
+
+def info(camera=VGA, **changes):
+    """Return a real sensor_msgs/CameraInfo of ``camera`` with some fields changed."""
+    from sensor_msgs.msg import CameraInfo
+    msg = CameraInfo()
+    msg.header.frame_id = 'evi_d31'
+    fill_camera_info(msg, camera)
+    for name, value in changes.items():
+        if isinstance(value, dict):
+            values = list(getattr(msg, name))
+            for index, v in value.items():
+                values[index] = v
+            value = values
+        setattr(msg, name, value)
+    return msg
+
+
+def test_camera_info_round_trip():
+    camera = camera_from_info(info())
+    assert (camera.width, camera.height, camera.name) == (640, 480, 'evi_d31')
+    assert np.array_equal(camera.K, VGA.K) and np.array_equal(camera.D, VGA.D)
+    # No coefficients: no distortion.
+    assert not camera_from_info(info(d=[])).has_distortion
+
+
+@pytest.mark.parametrize('changes, words', [
+    # Seen in fuzzing: K[2][2] = 0 gave "unexpected LinAlgError: Singular matrix".
+    ({'k': {8: 0.0}}, 'last row'),
+    ({'k': {6: 1.0, 7: 1.0}}, 'last row'),
+    ({'k': {3: 4.0}}, 'K\\[1\\]\\[0\\]'),
+    # Seen in fuzzing: finite but extreme fx, fy gave NaN poses.
+    ({'k': {0: 1e-300}}, 'field of view'),
+    ({'k': {4: 5e307}}, 'field of view'),
+    ({'k': {0: 1500.0}}, 'fx / fy'),
+    # Seen in fuzzing: the principal point far outside, D = 1e300 (poses 1.2 km off).
+    ({'k': {2: 64000.0}}, 'principal point cx'),
+    ({'d': {0: 1e300}}, 'out of range'),
+    ({'d': {0: -3.0}}, 'cannot be undone'),
+    ({'k': {0: math.nan}}, 'finite'),
+    ({'k': {0: 0.0, 2: 0.0, 4: 0.0, 5: 0.0, 8: 0.0}}, 'all zeros'),
+    ({'distortion_model': 'kannala_brandt'}, 'not supported'),
+    ({'d': [0.1, 0.0]}, 'needs 4 or 5'),
+    ({'r': {0: -1.0}}, 'not a rotation'),
+    ({'p': {10: 0.0}}, 'not a valid P'),
+    ({'width': 0}, 'image size'),
+    ({'binning_x': 1000}, 'binning'),
+])
+def test_bad_camera_info_is_a_camera_error(changes, words):
+    with pytest.raises(CameraError, match=words) as excinfo:
+        camera_from_info(info(**changes))
+    assert '\n' not in str(excinfo.value)
+    assert str(excinfo.value).startswith('camera_info: ')
+
+
+def test_camera_info_roi_and_binning():
+    msg = info(binning_x=2, binning_y=2)
+    camera = camera_from_info(msg)
+    assert (camera.width, camera.height) == (320, 240)
+    assert camera.fx == VGA.fx / 2 and camera.cx == VGA.cx / 2
+    msg = info()
+    msg.roi.x_offset, msg.roi.y_offset, msg.roi.width, msg.roi.height = 100, 50, 200, 100
+    camera = camera_from_info(msg)
+    assert (camera.width, camera.height) == (200, 100)
+    assert (camera.cx, camera.cy) == (VGA.cx - 100, VGA.cy - 50)
+    # A pixel of the region sees the same ray as the full image's pixel.
+    ray = VGA.normalize(np.array([[150.0, 80.0]]))
+    assert np.allclose(camera.normalize(np.array([[50.0, 30.0]])), ray)
+    msg.roi.width = 600
+    with pytest.raises(CameraError, match='roi'):
+        camera_from_info(msg)
+
+
+def test_camera_info_is_validated_once_per_content():
+    first = camera_from_info(info())
+    assert camera_from_info(info()) is first
+    # Any changed field is checked again.
+    with pytest.raises(CameraError):
+        camera_from_info(info(d={0: 1e300}))
+    assert camera_from_info(info()) is first
+
+
+def test_not_a_camera_info():
+    with pytest.raises(CameraError, match='missing field'):
+        camera_from_info(object())
+    long_name = SimpleNamespace(width=640, height=480, distortion_model='', d=[],
+                                k=list(VGA.K.ravel()), header=SimpleNamespace(
+                                    frame_id='x' * 100000))
+    assert len(camera_from_info(long_name).name) == 80
+
+
+odd = st.one_of(st.floats(), st.integers(), st.none(), st.text(max_size=3), st.booleans())
+
+
+@settings(FUZZ, max_examples=60)
+@given(width=st.one_of(st.just(640), odd), height=st.one_of(st.just(480), odd),
+       model=st.one_of(st.sampled_from(['plumb_bob', 'rational_polynomial', 'equidistant', '']),
+                       odd),
+       k=st.one_of(st.just(list(VGA.K.ravel())), st.lists(st.floats(), min_size=9, max_size=9),
+                   st.lists(odd, max_size=10), odd),
+       d=st.one_of(st.lists(st.floats(-1, 1), max_size=9), st.lists(odd, max_size=9), odd),
+       binning=st.one_of(st.integers(0, 4), odd),
+       roi=st.one_of(st.none(), st.tuples(st.integers(-5, 700), st.integers(-5, 700),
+                                          st.integers(-5, 700), st.integers(-5, 700))))
+def test_any_camera_info_gives_a_valid_camera_or_a_camera_error(width, height, model, k, d,
+                                                                binning, roi):
+    msg = SimpleNamespace(width=width, height=height, distortion_model=model, d=d, k=k,
+                          binning_x=binning, binning_y=1, header=SimpleNamespace(frame_id='c'))
+    if roi is not None:
+        msg.roi = SimpleNamespace(x_offset=roi[0], y_offset=roi[1], width=roi[2],
+                                  height=roi[3])
+    try:
+        camera = camera_from_info(msg)
+    except CameraError as exc:
+        assert '\n' not in str(exc) and len(str(exc)) < 400
+        return
+    assert np.all(np.isfinite(camera.K)) and camera.width > 0 and camera.height > 0
+    rays = camera.normalize(np.array([[0.0, 0.0], [camera.width - 1.0, camera.height - 1.0]]))
+    assert np.all(np.isfinite(rays))

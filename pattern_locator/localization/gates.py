@@ -1,0 +1,422 @@
+"""
+Plausibility gates on the robot's pose: a wrong location is worse than none.
+
+A fix from one card passes the **static gates** (:meth:`FixGates.check`)
+only if: its pose and covariance are finite and the covariance is positive
+definite and not huge; the camera is in front of the card, at a plausible
+distance and angle; the base is on the floor of its room (height, roll and
+pitch within bounds) and inside the room's footprint from the building map
+(plus a margin), or inside the building when the room has no size. The
+**continuity gate** (:meth:`FixGates.check_continuity`) compares the fix
+with the last one returned: a jump beyond what the robot's motion allows
+(its odometry when given, else a maximum speed and yaw rate), by
+Mahalanobis distance, is held back until a second image agrees with it.
+Every rejection is counted by reason (:data:`REASONS`).
+
+Besides bad input, these gates are what stops the mirror image of a card
+printed without a handedness mark: it decodes, and gives a pose that is
+plausible on its own (the camera mirrored about the card's normal), but
+not continuous with where the robot was.
+
+Frames: the building frame is z up (gravity along -z), as the building
+map's; each room's z is up from its floor, and its ``size`` is the box from
+its origin along +x, +y, +z (building.yaml). Covariances are 6x6: position
+(m), then a small rotation about the frame's axes (rad), as
+``RobotFix.covariance``.
+"""
+
+from dataclasses import dataclass, fields
+import math
+from typing import Dict, NamedTuple, Optional, Tuple
+
+import numpy as np
+
+from .building import BuildingMap, Room
+from ..errors import ConfigError
+from ..vision.geometry import Pose, rotation_vector, skew
+
+# Reasons a fix is not returned (diagnostics keys: ``rejected_<reason>``).
+REASONS = (
+    'not_finite',                # NaN or inf in the pose or the covariance
+    'covariance',                # covariance not symmetric positive definite, or too large
+    'camera_behind_card',        # the camera is not in front of the card
+    'camera_distance',           # camera too close to or too far from the card
+    'view_angle',                # seen too obliquely to be true
+    'base_height',               # base not at the floor's height
+    'roll_pitch',                # base tipped more than a ground robot can be
+    'outside_footprint',         # base outside its room (plus margin) or the building
+    'jump',                      # not continuous with the last fix: held until confirmed
+    'unconfirmed_first',         # the first fix (or the first after a reset): held likewise
+)
+FOOTPRINTS = ('room', 'building', 'off')
+
+
+@dataclass(frozen=True)
+class GateParameters:
+    """
+    The gates' thresholds; the defaults suit a ground robot indoors.
+
+    Each field is meant to be a ROS parameter of the locator node under the
+    same name, prefixed ``gates.``.
+    """
+
+    # Covariance: the largest position standard deviation a fix may have.
+    max_position_sigma_m: float = 1.0
+    # The camera in front of the card: distance and angle off the card's normal.
+    min_camera_distance_m: float = 0.3
+    max_camera_distance_m: float = 20.0
+    max_view_angle_deg: float = 85.0
+    # The base on its room's floor (room frame z), not tipped over.
+    min_base_height_m: float = -0.5
+    max_base_height_m: float = 0.5
+    max_roll_deg: float = 10.0
+    max_pitch_deg: float = 10.0
+    # 'room': inside the card's room (its size in the map) plus the margin,
+    # or inside the building's box when the room has no size; 'building':
+    # inside the box of every sized room; 'off'.
+    footprint: str = 'room'
+    footprint_margin_m: float = 0.5
+    # Continuity, without odometry: how fast the base can move and turn.
+    max_speed_m_s: float = 1.0
+    max_yaw_rate_deg_s: float = 90.0
+    # A jump beyond this Mahalanobis distance from the last fix is held back.
+    max_jump_mahalanobis: float = 5.0
+    # Standard deviations added to both fixes' before comparing them (an
+    # estimator's covariance can be overconfident).
+    jump_sigma_floor_m: float = 0.05
+    jump_sigma_floor_deg: float = 2.0
+    # A held-back fix is returned when an image at most this much later agrees.
+    confirm_within_s: float = 2.0
+    # Hold back the first fix too, until a second image agrees with it.
+    confirm_first_fix: bool = True
+    # A stamp this much older than the last fix's means the clock jumped back
+    # (a bag replayed again): continuity starts over.
+    clock_jump_back_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == 'footprint':
+                if value not in FOOTPRINTS:
+                    raise ConfigError(f'gates: footprint must be one of '
+                                      f'{", ".join(FOOTPRINTS)}, got {value!r}')
+            elif f.name == 'confirm_first_fix':
+                if not isinstance(value, bool):
+                    raise ConfigError(f'gates: confirm_first_fix must be true or false, got '
+                                      f'{value!r}')
+            elif (isinstance(value, bool) or not isinstance(value, (int, float))
+                  or not math.isfinite(value)):
+                raise ConfigError(f'gates: {f.name} must be a finite number, got {value!r}')
+            elif value < 0.0 and f.name != 'min_base_height_m':
+                raise ConfigError(f'gates: {f.name} must be >= 0, got {value!r}')
+        if self.min_camera_distance_m >= self.max_camera_distance_m:
+            raise ConfigError('gates: min_camera_distance_m must be below '
+                              'max_camera_distance_m')
+        if self.min_base_height_m >= self.max_base_height_m:
+            raise ConfigError('gates: min_base_height_m must be below max_base_height_m')
+
+
+@dataclass(frozen=True, eq=False)
+class BaseMotion:
+    """
+    The base's motion from odometry since a stamp (the last fix's), with its covariance.
+
+    ``T_start_end``: the base at the image's time in the base frame at
+    ``since_stamp_s``. ``covariance``: 6x6 of that motion, translation (m)
+    then rotation (rad), in the start base frame.
+    """
+
+    since_stamp_s: float
+    T_start_end: Pose
+    covariance: np.ndarray
+
+
+class Rejection(NamedTuple):
+    """Why a fix was not returned: a reason of :data:`REASONS` and one line of detail."""
+
+    reason: str
+    message: str
+
+
+def pose_in_building(T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
+                     building: BuildingMap) -> Tuple[Pose, np.ndarray, Optional[Room]]:
+    """Return a fix's pose and covariance in the building frame, and its room (if any)."""
+    if frame_id == building.frame:
+        return T_frame_base, covariance, None
+    room = building.room_by_frame(frame_id)
+    R = room.T_building_room.R
+    J = np.zeros((6, 6))
+    J[:3, :3] = R
+    J[3:, 3:] = R
+    return room.T_building_room @ T_frame_base, J @ covariance @ J.T, room
+
+
+def _roll_pitch(R: np.ndarray) -> Tuple[float, float]:
+    """Return (roll, pitch) in radians of a rotation whose frame has z up (ZYX Euler)."""
+    return (math.atan2(R[2, 1], R[2, 2]),
+            math.asin(float(np.clip(-R[2, 0], -1.0, 1.0))))
+
+
+class _Fix(NamedTuple):
+    stamp: float
+    T: Pose                     # base in the building frame
+    covariance: np.ndarray      # in the building frame
+
+
+class FixGates:
+    """
+    The gates of one locator: static checks per fix, continuity over time, counts.
+
+    Not thread-safe: one thread processes the images (the locator's worker);
+    :meth:`counts` returns a copy, safe to read from another thread.
+    """
+
+    def __init__(self, building: BuildingMap,
+                 parameters: Optional[GateParameters] = None) -> None:
+        self.building = building
+        self.parameters = parameters if parameters is not None else GateParameters()
+        self._counts: Dict[str, int] = dict.fromkeys(REASONS, 0)
+        self._accepted: Optional[_Fix] = None
+        self._pending: Optional[_Fix] = None
+        self._building_box = self._box_of_rooms()
+
+    # Counts and state -------------------------------------------------------------
+
+    def counts(self) -> Dict[str, int]:
+        """Return the number of rejections so far, by reason (every reason listed)."""
+        return dict(self._counts)
+
+    def count(self, rejection: Rejection) -> Rejection:
+        """Count a rejection; return it."""
+        self._counts[rejection.reason] += 1
+        return rejection
+
+    def reset(self) -> None:
+        """Forget the last fix and any held-back one (continuity starts over)."""
+        self._accepted = None
+        self._pending = None
+
+    @property
+    def last_stamp(self) -> Optional[float]:
+        """Return the stamp of the last fix returned (what odometry is measured from)."""
+        return None if self._accepted is None else self._accepted.stamp
+
+    # Static gates ----------------------------------------------------------------
+
+    def check(self, T_frame_base: Pose, covariance: Optional[np.ndarray], frame_id: str,
+              room: Optional[Room] = None, T_camera_card: Optional[Pose] = None
+              ) -> Optional[Rejection]:
+        """
+        Return why a fix fails a static gate (counted), or None if it passes them all.
+
+        ``T_frame_base`` and ``covariance`` in the frame ``frame_id`` (a room's
+        or the building's); ``room``: the room the base should be in (the
+        card's; default: the room of ``frame_id``); ``T_camera_card``: the
+        card in the camera frame, when the fix comes from one card.
+        """
+        rejection = self._static(T_frame_base, covariance, frame_id, room, T_camera_card)
+        return None if rejection is None else self.count(rejection)
+
+    def _static(self, T_frame_base: Pose, covariance: Optional[np.ndarray], frame_id: str,
+                room: Optional[Room], T_camera_card: Optional[Pose]) -> Optional[Rejection]:
+        p = self.parameters
+        arrays = [T_frame_base.R, T_frame_base.t]
+        if T_camera_card is not None:
+            arrays += [T_camera_card.R, T_camera_card.t]
+        if covariance is None or np.shape(covariance) != (6, 6):
+            return Rejection('covariance', 'no 6x6 covariance')
+        if not all(np.all(np.isfinite(a)) for a in arrays + [covariance]):
+            return Rejection('not_finite', 'pose or covariance not finite')
+        rejection = _check_covariance(covariance, p.max_position_sigma_m)
+        if rejection is not None:
+            return rejection
+        if T_camera_card is not None:
+            rejection = self._check_camera(T_camera_card)
+            if rejection is not None:
+                return rejection
+        T_building_base, _, frame_room = pose_in_building(T_frame_base, covariance, frame_id,
+                                                          self.building)
+        room = room if room is not None else frame_room
+        roll, pitch = _roll_pitch(T_building_base.R)
+        if abs(roll) > math.radians(p.max_roll_deg) or abs(pitch) > math.radians(
+                p.max_pitch_deg):
+            return Rejection('roll_pitch', f'base rolled {math.degrees(roll):.1f} deg, pitched '
+                             f'{math.degrees(pitch):.1f} deg (limits {p.max_roll_deg:g}, '
+                             f'{p.max_pitch_deg:g} deg)')
+        if room is not None:
+            height = float((room.T_building_room.inverse() @ T_building_base).t[2])
+            if not p.min_base_height_m <= height <= p.max_base_height_m:
+                return Rejection('base_height', f'base {height:.2f} m above the floor of '
+                                 f'{room.frame} (limits {p.min_base_height_m:g}..'
+                                 f'{p.max_base_height_m:g} m)')
+        return self._check_footprint(T_building_base, room)
+
+    def _check_camera(self, T_camera_card: Pose) -> Optional[Rejection]:
+        p = self.parameters
+        camera = T_camera_card.inverse().t          # the camera in the card frame
+        distance = float(np.linalg.norm(camera))
+        if camera[2] <= 0.0 or T_camera_card.t[2] <= 0.0:
+            return Rejection('camera_behind_card', f'the camera would be behind the card '
+                             f'(or the card behind the camera): {distance:.2f} m away')
+        if not p.min_camera_distance_m <= distance <= p.max_camera_distance_m:
+            return Rejection('camera_distance', f'the camera would be {distance:.3g} m from '
+                             f'the card (limits {p.min_camera_distance_m:g}..'
+                             f'{p.max_camera_distance_m:g} m)')
+        angle = math.degrees(math.acos(min(1.0, camera[2] / distance)))
+        if angle > p.max_view_angle_deg:
+            return Rejection('view_angle', f'the card would be seen {angle:.1f} deg off its '
+                             f'normal (limit {p.max_view_angle_deg:g} deg)')
+        return None
+
+    def _check_footprint(self, T_building_base: Pose, room: Optional[Room]
+                         ) -> Optional[Rejection]:
+        p = self.parameters
+        if p.footprint == 'off':
+            return None
+        if p.footprint == 'room' and room is not None and room.size is not None:
+            x, y = (room.T_building_room.inverse().apply(T_building_base.t[None])[0, :2])
+            length, width = room.size[0], room.size[1]
+            m = p.footprint_margin_m
+            if -m <= x <= length + m and -m <= y <= width + m:
+                return None
+            return Rejection('outside_footprint', f'base at ({x:.2f}, {y:.2f}) m is outside '
+                             f'{room.frame} ({length:g} x {width:g} m, margin {m:g} m)')
+        if self._building_box is None:
+            return None                   # no room has a size: nothing to check against
+        low, high = self._building_box
+        m = p.footprint_margin_m
+        x, y, z = T_building_base.t
+        if np.all(low - m <= [x, y, z]) and np.all([x, y, z] <= high + m):
+            return None
+        return Rejection('outside_footprint', f'base at ({x:.2f}, {y:.2f}, {z:.2f}) m is '
+                         f'outside the building (margin {m:g} m)')
+
+    def _box_of_rooms(self) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """Return the building-frame box around every sized room (None if none is)."""
+        corners = []
+        for room in self.building.rooms.values():
+            if room.size is None:
+                continue
+            box = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)],
+                           dtype=float) * np.asarray(room.size, dtype=float)
+            corners.append(room.T_building_room.apply(box))
+        if not corners:
+            return None
+        points = np.vstack(corners)
+        return points.min(axis=0), points.max(axis=0)
+
+    # Continuity ---------------------------------------------------------------------
+
+    def check_continuity(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
+                         stamp_s: Optional[float], odometry: Optional[BaseMotion] = None
+                         ) -> Optional[Rejection]:
+        """
+        Return why a fix is held back (counted), or None to return it (it becomes the last).
+
+        Without a stamp, continuity cannot be judged: the fix passes and
+        nothing is remembered. ``odometry``: the base's motion since
+        :attr:`last_stamp`; it is used when its ``since_stamp_s`` is that
+        stamp (within 1 ms), else the maximum speed and yaw rate are.
+        """
+        if stamp_s is None or not math.isfinite(stamp_s):
+            return None
+        p = self.parameters
+        T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
+        fix = _Fix(float(stamp_s), T, cov)
+        last = self._accepted
+        if last is not None and fix.stamp < last.stamp - p.clock_jump_back_s:
+            self.reset()
+            last = None
+        if last is None:
+            if not p.confirm_first_fix or self._confirms(fix):
+                return self._accept(fix)
+            self._pending = fix
+            return self.count(Rejection('unconfirmed_first', 'first fix: held back until a '
+                                        'second image agrees with it'))
+        distance = self._distance(last, fix, odometry)
+        if distance <= p.max_jump_mahalanobis or self._confirms(fix):
+            return self._accept(fix)
+        self._pending = fix
+        jump = float(np.linalg.norm(fix.T.t - last.T.t))
+        return self.count(Rejection(
+            'jump', f'{jump:.2f} m from the last fix {fix.stamp - last.stamp:.2f} s ago '
+            f'(Mahalanobis {distance:.3g} > {p.max_jump_mahalanobis:g}): held back until a '
+            f'second image agrees'))
+
+    def _accept(self, fix: _Fix) -> None:
+        self._accepted = fix
+        self._pending = None
+        return None
+
+    def _confirms(self, fix: _Fix) -> bool:
+        """Return whether ``fix`` agrees with the held-back fix (which it then confirms)."""
+        pending = self._pending
+        if pending is None or abs(fix.stamp - pending.stamp) > self.parameters.confirm_within_s:
+            return False
+        return self._distance(pending, fix, None) <= self.parameters.max_jump_mahalanobis
+
+    def _distance(self, before: _Fix, after: _Fix, odometry: Optional[BaseMotion]) -> float:
+        """Return the Mahalanobis distance of ``after`` from where ``before`` allows it."""
+        p = self.parameters
+        floor = np.diag([p.jump_sigma_floor_m ** 2] * 3
+                        + [math.radians(p.jump_sigma_floor_deg) ** 2] * 3)
+        if odometry is not None and abs(odometry.since_stamp_s - before.stamp) <= 1e-3:
+            predicted, predicted_cov = _predict(before, odometry)
+            delta = _difference(predicted, after.T)
+        else:
+            predicted_cov = before.covariance
+            delta = _difference(before.T, after.T)
+            dt = abs(after.stamp - before.stamp)
+            delta[:3] = _shrink(delta[:3], p.max_speed_m_s * dt)
+            # Turning in place: the yaw rate allows a rotation about the vertical.
+            delta[5:] = _shrink(delta[5:], math.radians(p.max_yaw_rate_deg_s) * dt)
+        total = predicted_cov + after.covariance + floor
+        try:
+            d2 = float(delta @ np.linalg.solve(total, delta))
+        except np.linalg.LinAlgError:
+            return math.inf
+        return math.sqrt(d2) if d2 >= 0.0 and math.isfinite(d2) else math.inf
+
+
+def _check_covariance(covariance: np.ndarray, max_sigma_m: float) -> Optional[Rejection]:
+    scale = float(np.max(np.abs(covariance)))
+    if scale == 0.0 or np.max(np.abs(covariance - covariance.T)) > 1e-9 * scale:
+        return Rejection('covariance', 'covariance not symmetric positive definite')
+    try:
+        np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        return Rejection('covariance', 'covariance not positive definite')
+    sigma = math.sqrt(float(np.max(np.linalg.eigvalsh(covariance[:3, :3]))))
+    if sigma > max_sigma_m:
+        return Rejection('covariance', f'position uncertain by {sigma:.3g} m (limit '
+                         f'{max_sigma_m:g} m)')
+    return None
+
+
+def _difference(a: Pose, b: Pose) -> np.ndarray:
+    """Return b - a: position difference, then the rotation taking a to b (frame axes)."""
+    return np.concatenate([b.t - a.t, rotation_vector(b.R @ a.R.T)])
+
+
+def _shrink(vector: np.ndarray, allowance: float) -> np.ndarray:
+    """Return ``vector`` shortened by ``allowance`` (not past zero): motion the robot can do."""
+    norm = float(np.linalg.norm(vector))
+    if norm <= allowance:
+        return np.zeros_like(vector)
+    return vector * (1.0 - allowance / norm)
+
+
+def _predict(before: _Fix, odometry: BaseMotion) -> Tuple[Pose, np.ndarray]:
+    """Return the pose odometry predicts from ``before`` and its covariance (first order)."""
+    motion = odometry.T_start_end
+    predicted = before.T @ motion
+    R = before.T.R
+    # The last fix's rotation error swings the odometry's translation.
+    J_before = np.eye(6)
+    J_before[:3, 3:] = -skew(R @ motion.t)
+    J_motion = np.zeros((6, 6))
+    J_motion[:3, :3] = R
+    J_motion[3:, 3:] = R
+    cov = (J_before @ before.covariance @ J_before.T
+           + J_motion @ np.asarray(odometry.covariance, dtype=float) @ J_motion.T)
+    return predicted, 0.5 * (cov + cov.T)

@@ -8,22 +8,19 @@ import argparse
 import json
 import math
 import os
-from pathlib import Path
 import sys
 import time
 from typing import List, Optional, Sequence
 
-import cv2
 import numpy as np
 
 from . import __version__
 from .card.pattern import load_pattern_config
-from .errors import ConfigError, PatternLocatorError
+from .errors import ConfigError, ImageError, PatternLocatorError
+from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
-# 16 Mpx: a large camera's frame; a header declaring more is refused unread.
-MAX_IMAGE_PIXELS = 16_000_000
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -113,9 +110,9 @@ def _parser() -> argparse.ArgumentParser:
                         default=0.0, metavar='DEG',
                         help="reject views tilted less than this (the paper's rule: 25)")
     detect.add_argument('--max-pixels', type=_number_in(1, 2 ** 31, int, '--max-pixels'),
-                        default=MAX_IMAGE_PIXELS, metavar='N',
-                        help=f'refuse images larger than this, before decoding '
-                             f'(default {MAX_IMAGE_PIXELS})')
+                        default=DEFAULT_MAX_PIXELS, metavar='N',
+                        help=f'refuse images with more pixels than this, from their header '
+                             f'and before decoding (default {DEFAULT_MAX_PIXELS})')
     detect.add_argument('--json', action='store_true', help='one JSON object per image')
     detect.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
     detect.set_defaults(handler=_detect)
@@ -217,14 +214,16 @@ def _make_pattern(args: argparse.Namespace) -> int:
 
 def _detect(args: argparse.Namespace) -> int:
     from .vision.camera import load_camera
+    from .vision.image_file import read_image
     cfg = load_pattern_config(args.pattern_config)
     camera = load_camera(args.camera)
     locator = CardLocator(cfg, estimator=args.estimator, min_tilt_deg=args.min_tilt)
     status = 0
     for name in args.images:
-        image = _read_image(name)
-        if isinstance(image, str):
-            _error(image)
+        try:
+            image = read_image(name, max_pixels=args.max_pixels)
+        except ImageError as exc:
+            _error(str(exc))
             status = 2
             continue
         if image.shape[1] != camera.width or image.shape[0] != camera.height:
@@ -241,25 +240,6 @@ def _detect(args: argparse.Namespace) -> int:
         else:
             _print_text(name, elapsed_ms, located)
     return status
-
-
-def _read_image(name: str):
-    path = Path(name)
-    if path.is_dir():
-        return f'{name}: is a directory, not an image file'
-    if not path.is_file():
-        return f'{name}: no such image file'
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        return f'{name}: cannot decode image (not a PNG/JPEG/... file, or corrupt)'
-    if image.dtype == np.uint16:
-        image = (image >> 8).astype(np.uint8)
-    if image.dtype != np.uint8:
-        return f'{name}: unsupported pixel type {image.dtype} (use 8 or 16 bits)'
-    if image.ndim == 3 and image.shape[2] == 4:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-    # A grey image is kept grey: the detector finds the geometry, not the code.
-    return image
 
 
 def _rounded(values, digits: int) -> List:

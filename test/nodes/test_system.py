@@ -159,7 +159,7 @@ def test_demo_runs_end_to_end_within_its_tolerance(tmp_path):
     # The README's tolerance: every stop within 5 cm, the mean within 2 cm.
     assert max(errors_cm) < 5.0 and sum(errors_cm) / 4 < 2.0, proc.stdout
     assert 'Table 1 avg' in proc.stdout
-    plot = Path(re.search(r'plot of the true and computed paths: (\S+)', proc.stdout)[1])
+    plot = Path(re.search(r'plot of the true and located positions: (\S+)', proc.stdout)[1])
     assert plot.is_file() and plot.stat().st_size > 1000
 
 

@@ -243,7 +243,9 @@ def test_any_calibration_gives_a_valid_camera_or_a_camera_error(
 
 
 @settings(FUZZ, max_examples=40)
-@given(width=st.integers(64, 4000), aspect=st.floats(0.5, 1.0), hfov=st.floats(5.0, 90.0),
+# Up to 70 degrees: with k1 = -0.1 a wider lens folds back before its corners
+# (r (1 + k1 r^2) peaks at r = 1.83), which the validator rightly refuses.
+@given(width=st.integers(64, 4000), aspect=st.floats(0.5, 1.0), hfov=st.floats(5.0, 70.0),
        ratio=st.floats(0.95, 1.05), centre=st.tuples(st.floats(-0.1, 0.1),
                                                      st.floats(-0.1, 0.1)),
        k1=st.floats(-0.1, 0.1), k2=st.floats(-0.02, 0.02), p=st.floats(-1e-3, 1e-3))

@@ -368,13 +368,15 @@ class DriveRoute:
         with np.errstate(divide='ignore'):
             vmax = np.minimum(vmax, limits.yaw_rate_rad_s / np.abs(kappa))
             vmax = np.minimum(vmax, np.sqrt(limits.yaw_accel_rad_s2 / np.abs(dkappa)))
-        v = vmax.copy()
-        v[0] = v[-1] = 0.0
+        vmax[0] = vmax[-1] = 0.0
+        # The forward (accelerate) and backward (brake) passes in closed form:
+        # v(s)^2 = min over s' <= s of vmax(s')^2 + 2 a (s - s'), and the same
+        # backwards, so both are running minima.
         two_a = 2.0 * limits.accel_m_s2
-        for i in range(len(v) - 1):
-            v[i + 1] = min(v[i + 1], math.sqrt(v[i] ** 2 + two_a * ds[i]))
-        for i in range(len(v) - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + two_a * ds[i]))
+        limit = vmax ** 2
+        forward = two_a * s + np.minimum.accumulate(limit - two_a * s)
+        backward = -two_a * s + np.minimum.accumulate((limit + two_a * s)[::-1])[::-1]
+        v = np.sqrt(np.maximum(np.minimum(forward, backward), 0.0))
         dt = 2.0 * ds / (v[1:] + v[:-1])
         t = np.concatenate([[0.0], np.cumsum(dt)])
         return _Run(s, x, y, heading, kappa, v, t)
@@ -447,10 +449,41 @@ class DriveRoute:
         return state.stop if state.phase == 'stop' else None
 
     def track(self, dt: float = 0.1) -> np.ndarray:
-        """Return (N, 5) rows of t, x, y, heading, speed every ``dt`` seconds (for plots)."""
+        """
+        Return the route every ``dt`` seconds from 0 to the end, one row per instant.
+
+        Columns: t, x, y, heading (unwrapped), speed, yaw rate, acceleration
+        (the same values as :meth:`state_at`, computed for all at once).
+        """
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt must be a positive number, got {dt!r}')
         times = np.arange(0.0, self.duration_s + 0.5 * dt, dt)
-        rows = []
-        for t in times:
-            st = self.state_at(float(t))
-            rows.append((st.t, st.pose.t[0], st.pose.t[1], st.heading, st.speed_m_s))
-        return np.array(rows)
+        out = np.zeros((len(times), 7))
+        out[:, 0] = times
+        index = np.clip(np.searchsorted(self._starts, times, side='right') - 1, 0, None)
+        for i, phase in enumerate(self._phases):
+            rows = np.flatnonzero(index == i)
+            if rows.size == 0:
+                continue
+            tau = np.clip(times[rows] - phase.start_s, 0.0, phase.duration_s)
+            if phase.kind == 'stop':
+                out[rows, 1:4] = phase.x, phase.y, phase.heading
+            elif phase.kind == 'turn':
+                turn = phase.turn
+                values = np.array([turn.at(float(x)) for x in tau]).reshape(-1, 3)
+                out[rows, 1:3] = phase.x, phase.y
+                out[rows, 3], out[rows, 5] = values[:, 0], values[:, 1]
+            else:
+                run = phase.run
+                k = np.clip(np.searchsorted(run.t, tau, side='right') - 1, 0, len(run.t) - 2)
+                ds = run.s[k + 1] - run.s[k]
+                acc = (run.v[k + 1] ** 2 - run.v[k] ** 2) / (2.0 * ds)
+                step = tau - run.t[k]
+                f = np.clip(run.v[k] * step + 0.5 * acc * step ** 2, 0.0, ds) / ds
+                speed = np.maximum(run.v[k] + acc * step, 0.0)
+                for column, values in ((1, run.x), (2, run.y), (3, run.heading)):
+                    out[rows, column] = values[k] + f * (values[k + 1] - values[k])
+                kappa = run.kappa[k] + f * (run.kappa[k + 1] - run.kappa[k])
+                out[rows, 4], out[rows, 5], out[rows, 6] = speed, speed * kappa, acc
+        out[:, 3] = np.unwrap(out[:, 3])
+        return out

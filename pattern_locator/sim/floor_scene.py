@@ -90,9 +90,8 @@ class FloorScene:
         self.head = head or HeadGeometry()
         self.options = options
         self._renderer = BoxRenderer(options)
-        # Card textures are built once: the sim renders the same cards every frame.
-        self._faces = {c.ids.as_tuple(): UncodedFace(DotCardTexture(world.pattern, c.code))
-                       for c in world.cards}
+        # Card textures are built once, when a card is first drawn.
+        self._faces: Dict[IdsKey, UncodedFace] = {}
         self._centres = np.array([c.T_building_card.t for c in world.cards]).reshape(-1, 3)
         self._normals = np.array([c.T_building_card.R[:, 2] for c in world.cards]
                                  ).reshape(-1, 3)
@@ -200,6 +199,12 @@ class FloorScene:
         """Return the image of a camera standing still at ``T_building_camera``."""
         return self.render(camera, [Field.still(T_building_camera)], seed)[0]
 
+    def _face(self, card: WorldCard) -> UncodedFace:
+        key = card.ids.as_tuple()
+        if key not in self._faces:
+            self._faces[key] = UncodedFace(DotCardTexture(self.world.pattern, card.code))
+        return self._faces[key]
+
     def _box_cards(self, camera: CameraModel, exposure: Field, blur: bool,
                    blurs: Dict[IdsKey, float], row_scale: float) -> List[BoxCard]:
         """Return the cards to draw for one field, each with its shadows and its blur."""
@@ -222,7 +227,7 @@ class FloorScene:
             key = card.ids.as_tuple()
             length = math.hypot(motion[0], motion[1] * row_scale)
             blurs[key] = max(blurs.get(key, 0.0), length)
-            out.append(BoxCard(T_middle @ card.T_building_card, self._faces[key],
+            out.append(BoxCard(T_middle @ card.T_building_card, self._face(card),
                                tuple(shadows), motion))
         return out
 

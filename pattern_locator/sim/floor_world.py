@@ -26,6 +26,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import cv2
 import numpy as np
+import yaml
 
 from .drive import DriveLimits, DriveRoute, Waypoint
 from ..card.pattern import Code, Ids, load_pattern_config, PatternConfig
@@ -233,6 +234,24 @@ class FloorWorld:
         return FloorWorld(building, pattern, floor, float(T.t[2]), walls, [], cards,
                           source=f'{building.source or "building"}: floor {floor} room {room}')
 
+    def as_hung(self, seed: int, max_m: float = 0.05, max_deg: float = 3.0) -> 'FloorWorld':
+        """
+        Return this world with every card off its mapped pose, as hung in a real building.
+
+        Each card turns by up to ``max_deg`` and shifts by up to ``max_m``
+        (:func:`as_hung_offset`, drawn from ``seed`` in ids order); the map,
+        walls and routes are this world's.
+        """
+        for name, value in (('max_m', max_m), ('max_deg', max_deg)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigError(f'sim: as hung {name} must be a number >= 0, got {value!r}')
+        rng = np.random.default_rng(seed)
+        cards = [WorldCard(c.map_card, c.map_card.T_building_card @ as_hung_offset(
+            rng, self._half, max_m, max_deg)) for c in self.cards]
+        return FloorWorld(self.building, self.pattern, self.floor, self.z, self.walls,
+                          self.obstacles, cards, self.routes, self.limits, self.robot_radius,
+                          self.robot_height, self.source)
+
     # Cards and rooms -------------------------------------------------------------------
 
     def card(self, ids: Union[Ids, Tuple[int, int, int]]) -> WorldCard:
@@ -245,14 +264,22 @@ class FloorWorld:
 
     def room_at(self, xy: Sequence[float]) -> Optional[Room]:
         """Return the map's room whose box holds the point (x, y), None in a wall or door."""
-        point = np.array([float(xy[0]), float(xy[1]), self.z])
+        number = int(self.rooms_at(np.asarray(xy, dtype=float).reshape(1, 2))[0])
+        return self.building.room(self.floor, number) if number else None
+
+    def rooms_at(self, xy: np.ndarray) -> np.ndarray:
+        """Return the room number holding each point (N, 2), 0 for none."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        out = np.zeros(len(xy), dtype=int)
+        points = np.column_stack([xy, np.full(len(xy), self.z)])
         for room in self.rooms:
             if room.size is None:
                 continue
-            local = room.T_building_room.inverse().apply(point[None])[0]
-            if 0.0 <= local[0] <= room.size[0] and 0.0 <= local[1] <= room.size[1]:
-                return room
-        return None
+            local = room.T_building_room.inverse().apply(points)
+            inside = ((local[:, 0] >= 0.0) & (local[:, 0] <= room.size[0])
+                      & (local[:, 1] >= 0.0) & (local[:, 1] <= room.size[1]) & (out == 0))
+            out[inside] = room.room
+        return out
 
     def bounds(self) -> Tuple[float, float, float, float]:
         """Return (xmin, ymin, xmax, ymax) of the solids."""
@@ -498,7 +525,8 @@ def _solids(walls: Sequence[Wall], obstacles: Sequence[Obstacle], z: float) -> S
 def load_floor_world(path: Optional[Union[str, Path]] = None,
                      pattern: Optional[PatternConfig] = None,
                      as_hung_seed: Optional[int] = None, as_hung_m: float = 0.05,
-                     as_hung_deg: float = 3.0) -> FloorWorld:
+                     as_hung_deg: float = 3.0,
+                     building: Optional[BuildingMap] = None) -> FloorWorld:
     """
     Load the sim's floor (default: the shipped ``config/sim_floor.yaml``).
 
@@ -506,17 +534,20 @@ def load_floor_world(path: Optional[Union[str, Path]] = None,
     hang flat on a wall or obstacle face (within 2.5 mm), else ConfigError.
     ``as_hung_seed``: hang every card off its mapped pose by a seeded error
     of up to ``as_hung_m`` (position) and ``as_hung_deg`` (rotation); None
-    hangs them exactly where the map says.
+    hangs them exactly where the map says. ``building``: the map, if the
+    caller has already loaded the file's ``building_map``.
     """
     path = Path(path) if path is not None else config_path('sim_floor.yaml')
     source = str(path)
     pattern = pattern if pattern is not None else load_pattern_config()
-    data = read_yaml(path, 'the sim floor')
+    # libyaml when PyYAML has it: the pure Python parser takes a noticeable time.
+    data = read_yaml(path, 'the sim floor', loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
     _keys(source, data, _TOP_KEYS, ('building_map', 'floor', 'walls'))
     map_path = Path(_text(source, 'building_map', data['building_map']))
     if not map_path.is_absolute():
         map_path = path.parent / map_path
-    building = load_building(map_path, pattern)
+    if building is None:
+        building = load_building(map_path, pattern)
     floor = _integer(source, 'floor', data['floor'])
     rooms = [r for (f, _), r in building.rooms.items() if f == floor]
     if not rooms:
@@ -548,16 +579,12 @@ def load_floor_world(path: Optional[Union[str, Path]] = None,
     map_cards = [c for r in rooms for c in r.cards]
     for card in map_cards:
         _check_on_face(source, card, solids, float(pattern.card_size) / 2.0)
-    rng = np.random.default_rng(as_hung_seed) if as_hung_seed is not None else None
-    cards = []
-    for card in sorted(map_cards, key=lambda c: c.ids.as_tuple()):
-        true = card.T_building_card
-        if rng is not None:
-            true = true @ as_hung_offset(rng, float(pattern.card_size) / 2.0, as_hung_m,
-                                         as_hung_deg)
-        cards.append(WorldCard(card, true))
-    return FloorWorld(building, pattern, floor, z, walls, obstacles, cards, routes, limits,
-                      radius, robot_height, source)
+    cards = [WorldCard(card, card.T_building_card) for card in map_cards]
+    world = FloorWorld(building, pattern, floor, z, walls, obstacles, cards, routes, limits,
+                       radius, robot_height, source)
+    if as_hung_seed is not None:
+        world = world.as_hung(as_hung_seed, as_hung_m, as_hung_deg)
+    return world
 
 
 def as_hung_offset(rng: np.random.Generator, half: float, max_m: float, max_deg: float

@@ -26,7 +26,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .fast_render import BoxCard, BoxRenderer, field_camera, pixel_box, UncodedFace
+from .fast_render import (BoxCard, BoxRenderer, distortion_margin, field_camera, pixel_box,
+                          UncodedFace)
 from .floor_world import FloorWorld, WorldCard
 from .render import DotCardTexture, NEAR_PLANE, RenderOptions
 from .world import SIM_RENDER_OPTIONS
@@ -116,14 +117,59 @@ class FloorScene:
         aim_pan, aim_tilt = self.head.aim_angles(T_building_base.inverse().apply(centre[None])[0])
         return _wrap(aim_pan - pan), _wrap(aim_tilt - tilt)
 
+    def oracle_gaze(self, T_building_base: Pose, max_distance_m: float = 8.0,
+                    max_view_deg: float = 65.0) -> Optional[Tuple[IdsKey, float, float]]:
+        """
+        Return the nearest card the head could look at whole, and the (pan, tilt) aiming at it.
+
+        An oracle from the truth (for benchmarks, tests and survey walks, not
+        a driver): a card whose every dot is in sight of the camera aimed at
+        it, within ``max_distance_m`` and ``max_view_deg`` of its normal,
+        with head angles inside the travel limits. None if there is none.
+        """
+        best = None
+        base_eye = T_building_base.apply(np.array([self.head.base_to_pan_xyz]))[0]
+        rel = self._centres - base_eye
+        distance = np.linalg.norm(rel, axis=1)
+        cos_view = -np.einsum('ij,ij->i', rel, self._normals) / np.maximum(distance, 1e-9)
+        limit = math.cos(math.radians(max_view_deg))
+        for k in np.argsort(distance):
+            if distance[k] > max_distance_m:
+                break
+            if cos_view[k] < limit:
+                continue
+            card = self.world.cards[int(k)]
+            key = card.ids.as_tuple()
+            try:
+                pan, tilt = self.card_angles(T_building_base, 0.0, 0.0, key)
+            except ValueError:
+                continue
+            if not self.head.within_limits(pan, tilt):
+                continue
+            eye = self.true_camera_pose(T_building_base, pan, tilt).t
+            if self.world.visible_dots(card, eye).all():
+                best = (key, pan, tilt)
+                break
+        return best
+
     def candidates(self, T_building_camera: Pose, camera: CameraModel,
                    margin_px: float = 0.0) -> List[WorldCard]:
         """Return the cards printed side towards the camera whose square may be in the image."""
         eye = T_building_camera.t
         facing = np.einsum('ij,ij->i', eye - self._centres, self._normals) > 1e-3
+        # A cone test first (cheap, for all cards at once): the card's centre
+        # within the field of view widened by the card's own angular size.
+        local = (self._centres - eye) @ T_building_camera.R
+        reach = self._half * math.sqrt(2.0)
+        slack = 1.5 + distortion_margin(camera) / min(camera.fx, camera.fy)
+        tan_x = slack * (max(camera.cx, camera.width - camera.cx) + margin_px) / camera.fx
+        tan_y = slack * (max(camera.cy, camera.height - camera.cy) + margin_px) / camera.fy
+        depth = local[:, 2] + reach
+        near = ((depth > 0.0) & (np.abs(local[:, 0]) - reach <= tan_x * depth)
+                & (np.abs(local[:, 1]) - reach <= tan_y * depth))
         T_camera_building = T_building_camera.inverse()
         out = []
-        for k in np.flatnonzero(facing):
+        for k in np.flatnonzero(facing & near):
             card = self.world.cards[int(k)]
             T_camera_card = T_camera_building @ card.T_building_card
             if pixel_box(camera, T_camera_card, self._half, margin_px) is not None:

@@ -68,6 +68,11 @@ class Exposure:
                     math.isfinite(value) and value >= 0.0):
                 raise ConfigError(f'sim exposure: {name} must be a number >= 0, got {value!r}')
 
+    def latest_stamp(self, now: float) -> float:
+        """Return the latest stamp whose exposure has ended by ``now`` (a live node's frame)."""
+        return now - (self.field_period_s / 2.0 if self.interlace else 0.0) - \
+            self.exposure_s / 2.0
+
     def windows(self, t: float) -> List[Tuple[float, float]]:
         """Return the (start, end) of each field's exposure for a frame stamped ``t``."""
         half = self.exposure_s / 2.0
@@ -87,9 +92,11 @@ class FrameTruth:
     ``speed_m_s`` and ``yaw_rate_rad_s``; ``room``: (floor, room) of the map
     room holding the base (None in a doorway); ``views``: the cards in the
     image and how much of each is seen; ``target``: the view nearest the
-    optical axis with every dot seen (None if none) and ``target_angles``
-    the head motion (pan, tilt) that centres it; ``blur_px``: each drawn
-    card's motion blur in pixels; ``exposures``: each field's (start, end).
+    optical axis with every dot seen, or, when none is (``target_in_view``
+    False), the card the head could turn to (``FloorScene.oracle_gaze``),
+    or None; ``target_angles``: the head motion (pan, tilt) that centres it;
+    ``blur_px``: each drawn card's motion blur in pixels; ``exposures``: each
+    field's (start, end).
     """
 
     stamp_s: float
@@ -103,6 +110,7 @@ class FrameTruth:
     room: Optional[Tuple[int, int]]
     views: Tuple[CardView, ...]
     target: Optional[Ids]
+    target_in_view: bool
     target_angles: Optional[Tuple[float, float]]
     blur_px: Tuple[Tuple[Tuple[int, int, int], float], ...]
     exposures: Tuple[Tuple[float, float], ...]
@@ -240,17 +248,29 @@ class FloorSim:
         """
         Return the sim of the paper's room (floor 1 room 3 of ``building.yaml``) and route.
 
-        The room's four walls, its six cards and ``SimRoute.paper_route``
-        (the same stops and headings as ``world.SimScene``'s), in the
-        building frame. ``kwargs`` go to the constructor.
+        ``SimRoute.paper_route`` (the same stops and headings as
+        ``world.SimScene``'s) in :meth:`one_room`. ``kwargs`` go to the
+        constructor.
         """
         building = building if building is not None else load_building()
-        world = FloorWorld.from_room(building, PAPER_FLOOR, PAPER_ROOM)
         route = SimRoute.paper_route(mode=mode, dwell_s=dwell_s, speed_m_s=speed_m_s,
                                      seed=seed, n_stops=n_stops, building=building)
         kwargs.setdefault('seed', seed)
-        return FloorSim(world, RoomRoute(route, building.room(PAPER_FLOOR, PAPER_ROOM)
-                                         .T_building_room), **kwargs)
+        return FloorSim.one_room(route, PAPER_FLOOR, PAPER_ROOM, building, **kwargs)
+
+    @staticmethod
+    def one_room(route: SimRoute, floor: int = PAPER_FLOOR, room: int = PAPER_ROOM,
+                 building: Optional[BuildingMap] = None, **kwargs) -> 'FloorSim':
+        """
+        Return the sim of a one-room ``SimRoute`` (room frame, e.g. the node's ``route_stops``).
+
+        The world is the room's four walls and its cards
+        (``FloorWorld.from_room``); poses are in the building frame.
+        """
+        building = building if building is not None else load_building()
+        world = FloorWorld.from_room(building, floor, room)
+        return FloorSim(world, RoomRoute(route, building.room(floor, room).T_building_room),
+                        **kwargs)
 
     @property
     def duration_s(self) -> float:
@@ -298,11 +318,14 @@ class FloorSim:
         views = tuple(self.scene.views(T_camera, camera))
         complete = [v for v in views if v.complete]
         target = min(complete, key=lambda v: v.off_axis_deg).ids if complete else None
+        if target is None:
+            gaze = self.scene.oracle_gaze(state.pose)
+            target = None if gaze is None else Ids(*gaze[0])
         angles = (self.scene.card_angles(state.pose, pan, tilt, target.as_tuple())
                   if target is not None else None)
         room = self.world.room_at(state.pose.t[:2])
         return FrameTruth(t, state.pose, T_camera, pan, tilt, state.speed_m_s,
                           state.yaw_rate_rad_s, state.phase,
                           None if room is None else (room.floor, room.room), views, target,
-                          angles, tuple(sorted((blurs or {}).items())),
+                          bool(complete), angles, tuple(sorted((blurs or {}).items())),
                           tuple(self.exposure.windows(t)))

@@ -111,6 +111,7 @@ def test_interlace_fields_differ_by_the_motion_between_them(quiet_scene):
     exposure = Exposure(0.01, interlace=True, field_period_s=period)
     fields = [Field(at(a), at((a + b) / 2.0), at(b)) for a, b in exposure.windows(0.0)]
     assert exposure.windows(0.0) == [(-0.015, -0.005), (0.005, 0.015)]
+    assert exposure.latest_stamp(0.015) == pytest.approx(0.0)
     dark, _ = darkness(quiet_scene, camera, fields)
     even, _ = spread_x(dark[0::2])
     odd, _ = spread_x(dark[1::2])
@@ -137,6 +138,7 @@ def test_a_frame_and_its_truth_locate_the_robot(floor_world):
     truth = frame.truth
     assert truth.room == (4, 3) and truth.phase == 'drive' and truth.stamp_s == t
     assert truth.pan == pytest.approx(aim[0]) and truth.target.as_tuple() == (4, 3, 3)
+    assert truth.target_in_view
     assert truth.target_angles == pytest.approx((0.0, 0.0), abs=1e-9)
     np.testing.assert_allclose(truth.T_building_base.t, state.pose.t)
     np.testing.assert_allclose(truth.T_building_camera.matrix(), (
@@ -174,7 +176,9 @@ def test_the_paper_room_is_still_there(floor_world):
         assert frame.truth.room == (1, 3) and frame.truth.blur_px[0][1] == 0.0
         expected = scene.render(stop.pose(), pan, tilt, camera, seed=k)
         assert np.abs(frame.image.astype(int) - expected).max() <= 1
-    assert sim.frame(100.0, lambda _: (0.0, 0.0), camera).truth.phase == 'stop'
+    away = sim.frame(100.0, lambda _: (0.0, -0.4), camera).truth     # at the floor
+    assert away.phase == 'stop' and away.views == () and not away.target_in_view
+    assert away.target is not None and max(np.abs(away.target_angles)) > 0.3
     driving = FloorSim.paper(mode='drive', dwell_s=1.0, n_stops=3)
     t = driving.route.route.dwell_window(0)[1] + 1.0
     # That route moves sideways as it turns (a holonomic base): speed is forward only.

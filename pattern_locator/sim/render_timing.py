@@ -12,7 +12,6 @@ mean, p99 and max per frame, and the share of frames that show a card.
 """
 
 import argparse
-import math
 import sys
 import time
 from typing import Callable, Dict, List, Optional, Sequence

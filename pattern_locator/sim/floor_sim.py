@@ -29,8 +29,9 @@ from typing import Callable, Deque, List, Optional, Tuple, Union
 import numpy as np
 
 from .drive import DriveRoute, DriveState, wrap_angle
+from .floor_file import load_floor_world
 from .floor_scene import CardView, Field, FloorScene
-from .floor_world import FloorWorld, load_floor_world
+from .floor_world import FloorWorld
 from .odometry import OdometryModel, OdometrySim, OdomSample
 from .render import RenderOptions
 from .world import PAPER_FLOOR, PAPER_ROOM, SIM_RENDER_OPTIONS, SimRoute

@@ -2,8 +2,8 @@
 
 from dataclasses import replace
 
+from pattern_locator.sim.floor_file import load_floor_world
 from pattern_locator.sim.floor_scene import FloorScene
-from pattern_locator.sim.floor_world import load_floor_world
 from pattern_locator.sim.world import SIM_RENDER_OPTIONS
 import pytest
 

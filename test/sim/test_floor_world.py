@@ -7,8 +7,9 @@ from pattern_locator.errors import ConfigError
 from pattern_locator.localization.building import load_building
 from pattern_locator.resources import config_path
 from pattern_locator.sim.drive import yaw_pose
+from pattern_locator.sim.floor_file import load_floor_world
 from pattern_locator.sim.floor_scene import FloorScene
-from pattern_locator.sim.floor_world import FloorWorld, load_floor_world
+from pattern_locator.sim.floor_world import FloorWorld
 from pattern_locator.sim.plan_plot import plot_floor_plan
 from pattern_locator.visca.zoom_table import ZoomTable
 from pattern_locator.vision.geometry import rotation_angle

@@ -11,7 +11,9 @@ calls, with route time ``t`` (seconds since the route started):
   :class:`FrameTruth`. ``head_at(time) -> (pan, tilt)`` gives the head's
   joint angles (rad, REP 103) at any time near ``t`` (the exposure reaches
   half an exposure, or half a field period plus half an exposure, either
-  side); :class:`HeadTrack` builds one from the emulated camera's states;
+  side); :class:`HeadTrack` builds one from the emulated camera's states.
+  A live node stamps its frame ``sim.exposure.latest_stamp(now)``, so the
+  whole exposure lies in the past;
 * :meth:`FloorSim.odometry` ``(t)``: every odometry sample due up to ``t``
   (publish them as nav_msgs/Odometry, frame ``odom``, child ``base_link``);
 * :meth:`FloorSim.state` ``(t)``: the base's true pose and twist.

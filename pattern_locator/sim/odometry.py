@@ -106,9 +106,12 @@ class OdomSample:
 
 def _covariance6(planar: np.ndarray) -> np.ndarray:
     """Embed an (x, y, yaw) covariance into ROS's 6 x 6 order."""
-    out = np.diag([0.0, 0.0, _PLANAR_VARIANCE, _PLANAR_VARIANCE, _PLANAR_VARIANCE, 0.0])
-    index = [0, 1, 5]
-    out[np.ix_(index, index)] = planar
+    out = np.zeros((6, 6))
+    out[2, 2] = out[3, 3] = out[4, 4] = _PLANAR_VARIANCE
+    out[:2, :2] = planar[:2, :2]
+    out[:2, 5] = planar[:2, 2]
+    out[5, :2] = planar[2, :2]
+    out[5, 5] = planar[2, 2]
     return out
 
 
@@ -179,11 +182,12 @@ class OdometrySim:
                                       [0.0, 1.0, turn / dt]]))
         self._k += 1
         noise_v = m.speed_noise_m_s ** 2 if moving else 0.0
-        twist = np.diag([noise_v + (m.scale_error * speed) ** 2 + _PLANAR_VARIANCE,
-                         (m.scale_error * lateral) ** 2 + _PLANAR_VARIANCE,
-                         _PLANAR_VARIANCE, _PLANAR_VARIANCE, _PLANAR_VARIANCE,
-                         m.yaw_rate_noise_rad_s ** 2 + m.yaw_bias_rad_s ** 2
-                         + (m.yaw_scale_error * rate) ** 2 + _PLANAR_VARIANCE])
+        twist = np.zeros((6, 6))
+        twist[0, 0] = noise_v + (m.scale_error * speed) ** 2 + _PLANAR_VARIANCE
+        twist[1, 1] = (m.scale_error * lateral) ** 2 + _PLANAR_VARIANCE
+        twist[2, 2] = twist[3, 3] = twist[4, 4] = _PLANAR_VARIANCE
+        twist[5, 5] = (m.yaw_rate_noise_rad_s ** 2 + m.yaw_bias_rad_s ** 2
+                       + (m.yaw_scale_error * rate) ** 2 + _PLANAR_VARIANCE)
         return OdomSample(stamp, yaw_pose(self._x, self._y, self._yaw), self._x, self._y,
                           self._yaw, speed, lateral, rate, _covariance6(self.covariance()),
                           twist, true)

@@ -103,7 +103,7 @@ def test_odometry_drift_statistics_match_their_parameters():
 
 
 def test_odometry_is_reproducible_however_it_is_polled():
-    route = straight_then_stand(distance=5.0, stand_s=2.0)
+    route = straight_then_stand(distance=2.0, stand_s=1.0)
     whole = OdometrySim(route, seed=9).advance_to(route.duration_s)
     polled = OdometrySim(route, seed=9)
     pieces = []

@@ -162,7 +162,7 @@ def test_a_frame_and_its_truth_locate_the_robot(floor_world):
 def test_the_paper_room_is_still_there(floor_world):
     # FloorSim's paper option: the room of world.SimScene, with its walls, in the
     # building frame; it renders the same images.
-    sim = FloorSim.paper(mode='stops', dwell_s=2.0, n_stops=4)
+    sim = FloorSim.paper(mode='stops', dwell_s=2.0, n_stops=3)
     scene = SimScene()
     room = scene.room.T_building_room
     camera = TABLE.camera_at(0)

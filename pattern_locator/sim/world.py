@@ -1,33 +1,29 @@
 """
-The simulated world of the ``sim`` node: a robot's route through a room and its camera's view.
+The one-room world of the ``sim`` node: a robot's route through a room and its camera's view.
 
 ROS-free. :class:`SimRoute` is the robot base's trajectory over time (the
 paper's 30 stops, still or driven between); :class:`SimScene` renders what
 the pan/tilt head's camera sees of a room of the building map and gives the
-ground truth (camera pose, head motion that would centre a card).
+ground truth (camera pose, head motion that would centre a card). A whole
+floor with walls, doors, a continuous drive and odometry is
+``floor_sim.FloorSim``.
 
 Rendering is fast enough for a live node (640x480 at tens of frames per
-second on one core): the background (painted wall, light gradient, colour
-cast, gamma) is rendered once per image size, and each frame only renders
-the pixel boxes that can show a card, with ``render.render_scene`` and a
-camera cropped to the box (exact: cropping shifts the principal point only,
-and the light gradient is re-expressed for the box). Sensor noise outside
-the boxes comes from a precomputed noise tile at a random offset.
+second on one core): ``fast_render.BoxRenderer`` renders only the pixel
+boxes that can show a card.
 """
 
-from dataclasses import dataclass, replace
-import functools
+from dataclasses import dataclass
 import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
-import cv2
 import numpy as np
 
+from .fast_render import BoxCard, BoxRenderer, UncodedFace
 from .paper_setup import route
-from .render import (CardPlacement, clip_in_front, DotCardTexture, NEAR_PLANE, render_scene,
-                     RenderOptions)
+from .render import DotCardTexture, NEAR_PLANE, RenderOptions
 from ..card.pattern import load_pattern_config, PatternConfig
-from ..errors import CodeError, ConfigError, ImageError
+from ..errors import CodeError, ConfigError
 from ..localization.building import BuildingMap, load_building, MappedCard, Room
 from ..localization.head import HeadGeometry
 from ..vision.camera import CameraModel
@@ -47,13 +43,6 @@ DEFAULT_YAW_RATE_RAD_S = 0.5
 SIM_RENDER_OPTIONS = RenderOptions(supersample=3, background='white', gain=0.85, gradient=0.15,
                                    gradient_angle_deg=30.0, colour_cast=(1.0, 0.97, 0.92),
                                    defocus_sigma_px=0.5, noise_sigma=1.0)
-# A box bigger than this many sub-samples (a close card, a long focal length) gets
-# fewer sub-samples per pixel, so that no frame takes much longer than the others;
-# big cards need them least.
-MAX_BOX_SAMPLES = 1 << 18
-# Noise outside the boxes: a tile this much bigger than the image, read at a random offset.
-_NOISE_PAD = 64
-_NOISE_SEED = 20231114
 
 
 # Route -------------------------------------------------------------------------------
@@ -218,63 +207,6 @@ class SimRoute:
 # Scene -------------------------------------------------------------------------------
 
 
-class _UncodedFace:
-    """
-    A card's printed face that render_scene does not know as a coded card.
-
-    So it skips the dot truth, the slowest part of a small render, which the
-    simulator does not use.
-    """
-
-    def __init__(self, texture: DotCardTexture) -> None:
-        self.size = texture.size
-        self.reflectance = texture.reflectance
-
-
-@functools.lru_cache(maxsize=16)
-def _distortion_margin(width: int, height: int, K: bytes, D: bytes, model: str) -> float:
-    """Return the largest distance (px) between a pixel and its undistorted pixel."""
-    camera = CameraModel(width, height, np.frombuffer(K).reshape(3, 3), np.frombuffer(D),
-                         model)
-    if not camera.has_distortion:
-        return 0.0
-    # Radial and tangential distortion peak on the border, at the corners.
-    u = np.linspace(-0.5, width - 0.5, 33)
-    v = np.linspace(-0.5, height - 0.5, 25)
-    border = np.vstack([np.column_stack([u, np.full_like(u, v[0])]),
-                        np.column_stack([u, np.full_like(u, v[-1])]),
-                        np.column_stack([np.full_like(v, u[0]), v]),
-                        np.column_stack([np.full_like(v, u[-1]), v])])
-    inner = np.stack(np.meshgrid(u[::4], v[::4]), axis=-1).reshape(-1, 2)
-    pixels = np.vstack([border, inner])
-    return float(np.max(np.linalg.norm(camera.undistort_pixels(pixels) - pixels, axis=1)))
-
-
-def _overlap(a: Tuple[int, int, int, int], b: Tuple[int, int, int, int]) -> bool:
-    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
-
-
-def _merge_boxes(items: List[Tuple[Tuple[int, int, int, int], CardPlacement]]
-                 ) -> List[Tuple[Tuple[int, int, int, int], List[CardPlacement]]]:
-    """Group cards whose boxes overlap (one render each, so the nearest card wins)."""
-    groups = [(box, [placement]) for box, placement in items]
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(groups)):
-            for j in range(i + 1, len(groups)):
-                (a, cards_a), (b, cards_b) = groups[i], groups[j]
-                if _overlap(a, b):
-                    groups[i] = ((min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]),
-                                  max(a[3], b[3])), cards_a + cards_b)
-                    del groups[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return groups
-
-
 class SimScene:
     """
     A room of the building as the head's camera sees it, and the ground truth.
@@ -290,13 +222,7 @@ class SimScene:
                  pattern: Optional[PatternConfig] = None, floor: int = PAPER_FLOOR,
                  room: int = PAPER_ROOM, head: Optional[HeadGeometry] = None,
                  options: RenderOptions = SIM_RENDER_OPTIONS) -> None:
-        if options.background not in ('white', 'black'):
-            raise ConfigError(f'sim: the background must be white or black, got '
-                              f'{options.background!r}')
-        if options.occluders or options.shot_noise:
-            raise ConfigError('sim: occluders and shot noise are not simulated')
-        if not (math.isfinite(options.gradient) and abs(options.gradient) < 1.0):
-            raise ConfigError(f'sim: gradient must be in (-1, 1), got {options.gradient!r}')
+        self._renderer = BoxRenderer(options)
         self.pattern = pattern if pattern is not None else load_pattern_config()
         self.building = building if building is not None else load_building(None, self.pattern)
         self.room: Room = self.building.room(floor, room)
@@ -304,9 +230,8 @@ class SimScene:
         self.options = options
         self._cards: Dict[int, MappedCard] = {c.ids.pattern: c for c in self.room.cards}
         # Card textures are built once: the sim renders the same cards every frame.
-        self._faces = {number: _UncodedFace(DotCardTexture(self.pattern, card.code))
+        self._faces = {number: UncodedFace(DotCardTexture(self.pattern, card.code))
                        for number, card in self._cards.items()}
-        self._frames: Dict[Tuple[int, int], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
     @property
     def card_numbers(self) -> List[int]:
@@ -355,96 +280,6 @@ class SimScene:
                seed: int = 0) -> np.ndarray:
         """Return the BGR uint8 image the head's camera sees (deterministic for a seed)."""
         T_camera_room = self.true_camera_pose(T_room_base, pan, tilt).inverse()
-        rng = np.random.default_rng(seed)
-        frame = self._noisy_background(camera.width, camera.height, rng)
-        margin = _distortion_margin(camera.width, camera.height, camera.K.tobytes(),
-                                    camera.D.tobytes(), camera.distortion_model)
-        # Room for the blur around a card (OpenCV's float kernels reach 4 sigma).
-        margin += 4.0 * self.options.defocus_sigma_px + self.options.motion_blur_px / 2.0 + 2.0
-        items = []
-        for number, card in self._cards.items():
-            T_camera_card = T_camera_room @ card.T_room_card
-            box = self._pixel_box(camera, T_camera_card, self._faces[number].size / 2.0,
-                                  margin)
-            if box is not None:
-                items.append((box, CardPlacement(T_camera_card, self._faces[number])))
-        for box, placements in _merge_boxes(items):
-            x0, y0, x1, y1 = box
-            frame[y0:y1, x0:x1] = self._render_box(camera, box, placements,
-                                                   int(rng.integers(1 << 31)))
-        if self.options.jpeg_quality is not None:
-            ok, data = cv2.imencode('.jpg', frame,
-                                    [cv2.IMWRITE_JPEG_QUALITY, self.options.jpeg_quality])
-            if not ok:
-                raise ImageError('sim: JPEG encoding failed')
-            frame = cv2.imdecode(data, cv2.IMREAD_COLOR)
-        return frame
-
-    @staticmethod
-    def _pixel_box(camera: CameraModel, T_camera_card: Pose, half: float, margin: float
-                   ) -> Optional[Tuple[int, int, int, int]]:
-        """
-        Return the pixels (x0, y0, x1, y1), ends exclusive, that may show the card.
-
-        The ideal (distortion-free) pixels of the card's visible outline,
-        widened by ``margin``, which covers the distortion and the blur.
-        """
-        corners = np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0],
-                            [-half, -half, 0.0]])
-        front = clip_in_front(T_camera_card.apply(corners))
-        if len(front) < 3:
-            return None
-        ideal = (front[:, :2] / front[:, 2:]) @ camera.K[:2, :2].T + camera.K[:2, 2]
-        low = np.floor(ideal.min(axis=0) - margin)
-        high = np.ceil(ideal.max(axis=0) + margin) + 1
-        x0, y0 = (int(max(v, 0)) for v in low)
-        x1, y1 = int(min(high[0], camera.width)), int(min(high[1], camera.height))
-        return (x0, y0, x1, y1) if x0 < x1 and y0 < y1 else None
-
-    def _render_box(self, camera: CameraModel, box: Tuple[int, int, int, int],
-                    placements: List[CardPlacement], seed: int) -> np.ndarray:
-        """Render the cards in a box of the image, as if the whole image were rendered."""
-        x0, y0, x1, y1 = box
-        w, h = x1 - x0, y1 - y0
-        K = camera.K.copy()
-        K[0, 2] -= x0
-        K[1, 2] -= y0
-        crop = CameraModel(w, h, K, camera.D, camera.distortion_model, camera.name)
-        options = self.options
-        # The light gradient is linear in the pixel position: re-express the
-        # image's gradient about the box's centre and over the box's reach.
-        angle = math.radians(options.gradient_angle_deg)
-        ca, sa = math.cos(angle), math.sin(angle)
-        reach = abs(ca) * (camera.width - 1) / 2.0 + abs(sa) * (camera.height - 1) / 2.0
-        box_reach = abs(ca) * (w - 1) / 2.0 + abs(sa) * (h - 1) / 2.0
-        offset = (ca * (x0 + (w - 1) / 2.0 - (camera.width - 1) / 2.0)
-                  + sa * (y0 + (h - 1) / 2.0 - (camera.height - 1) / 2.0))
-        light = 1.0 + options.gradient * offset / max(reach, 1e-9)
-        s = int(options.supersample)
-        while s > 1 and w * h * s * s > MAX_BOX_SAMPLES:
-            s -= 1
-        box_options = replace(options, supersample=s, gain=options.gain * light,
-                              gradient=options.gradient * box_reach / (light * max(reach, 1e-9)),
-                              jpeg_quality=None, seed=seed)
-        return render_scene(crop, placements, box_options).image
-
-    def _noisy_background(self, width: int, height: int, rng: np.random.Generator
-                          ) -> np.ndarray:
-        """Return a new image of the background with sensor noise."""
-        key = (width, height)
-        if key not in self._frames:
-            blank = CameraModel.from_focal(width, height, 1000.0)
-            clean = render_scene(blank, [], replace(self.options, noise_sigma=0.0,
-                                                    jpeg_quality=None, seed=0)).image
-            noise = np.rint(np.random.default_rng(_NOISE_SEED).normal(
-                0.0, self.options.noise_sigma, (height + _NOISE_PAD, width + _NOISE_PAD, 3)))
-            # Saturating uint8 add and subtract: the cheapest way to add noise per frame.
-            self._frames[key] = (clean, np.clip(noise, 0, 255).astype(np.uint8),
-                                 np.clip(-noise, 0, 255).astype(np.uint8))
-        clean, up, down = self._frames[key]
-        frame = clean.copy()
-        if self.options.noise_sigma > 0:
-            dy, dx = (int(v) for v in rng.integers(0, _NOISE_PAD + 1, 2))
-            cv2.add(frame, up[dy:dy + height, dx:dx + width], dst=frame)
-            cv2.subtract(frame, down[dy:dy + height, dx:dx + width], dst=frame)
-        return frame
+        cards = [BoxCard(T_camera_room @ card.T_room_card, self._faces[number])
+                 for number, card in self._cards.items()]
+        return self._renderer.render(camera, cards, seed)

@@ -123,7 +123,7 @@ class SocketTable:
                 self._cond.wait(min(deadline - now, 0.05))
 
     def release(self) -> None:
-        """The reserved command got its first reply (or none): one fewer on its way."""
+        """Count one fewer command on its way (it got its first reply, or none)."""
         with self._cond:
             self._reserved -= 1
             self._cond.notify_all()

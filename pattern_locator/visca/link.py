@@ -132,7 +132,7 @@ class SerialLink:
         self._callbacks.put(callback)
 
     def reset_backoff(self) -> None:
-        """The camera answered: the next reconnect starts with the shortest pause."""
+        """Start the next reconnect with the shortest pause (the camera answered)."""
         with self._lock:
             self._backoff_s = self.reconnect_initial_s
 

@@ -7,8 +7,12 @@ the answer of an inquiry, the echo of a broadcast, 04/05 of a cancel), so
 socket-0 errors and answers are unambiguous. After its ACK a command's
 completion is matched by socket number in the
 :class:`~pattern_locator.visca.sockets.SocketTable`, so ACK1, ACK2, C2, C1
-and answers between an ACK and its completion all work out. Runs on the
-transport's reader thread; no I/O here, so it can be fed any bytes.
+and answers between an ACK and its completion all work out. ACKs,
+completions and errors naming a socket the camera does not have (0, 3..F)
+are counted and never book a socket; when one comes as the first reply to a
+command, that command fails at once (:class:`ViscaReplyError`) instead of
+waiting out its timeout. Runs on the transport's reader thread; no I/O here,
+so it can be fed any bytes.
 """
 
 import logging
@@ -17,8 +21,9 @@ import time
 from typing import Callable, Optional
 
 from .exceptions import command_error, ViscaCancelled
-from .protocol import (BROADCAST, ERROR_CANCELLED, ERROR_NO_SOCKET, hex_bytes, PacketFramer,
-                       parse_reply, Reply, reply_header, ViscaError)
+from .protocol import (BROADCAST, COMMAND_SOCKETS, ERROR_CANCELLED, ERROR_NO_SOCKET, hex_bytes,
+                       PacketFramer, parse_reply, Reply, reply_header, ViscaError,
+                       ViscaReplyError)
 from .sockets import CommandResult, SocketTable
 from .stats import Counters
 
@@ -66,8 +71,14 @@ class ReplyDemux:
         self._on_network_change = on_network_change
         self._lock = threading.Lock()
         self._pending: Optional[Exchange] = None
-        self._framer = PacketFramer()
+        self._framer = PacketFramer(resync=True)
         self._extra_junk = 0
+        self._last_reply_at: Optional[float] = None
+
+    @property
+    def last_reply_at(self) -> Optional[float]:
+        """Return the ``time.monotonic()`` of the last reply parsed (None: none yet)."""
+        return self._last_reply_at
 
     @property
     def junk_bytes(self) -> int:
@@ -138,12 +149,16 @@ class ReplyDemux:
         network_change = False
         with self._lock:
             self._counters.add('replies')
+            self._last_reply_at = time.monotonic()
             ex = self._pending
             if ex is not None and ex.event.is_set():
                 ex = None
             kind = reply.kind
             if kind not in ('address_set', 'if_clear') and reply.address != self.address:
                 self._unmatched(reply, 'from another address')
+            elif kind in ('ack', 'completion', 'error') and reply.socket not in COMMAND_SOCKETS \
+                    and not (kind == 'error' and reply.socket == 0):
+                self._bad_socket(reply, ex)
             elif kind == 'network_change':
                 self._counters.add('network_changes')
                 network_change = True
@@ -208,6 +223,15 @@ class ReplyDemux:
             ex.deliver(reply, command_error(reply, ex.packet))
         elif socket == 0 or self._sockets.fail(socket, error) is None:
             self._unmatched(reply, 'nothing waits for it')
+
+    def _bad_socket(self, reply: Reply, ex: Optional[Exchange]) -> None:
+        self._counters.add('bad_socket_replies')
+        if reply.kind in ('ack', 'error') and ex is not None and ex.kind == 'command':
+            # The first reply to our command, and nonsense: what the camera did is unknown.
+            ex.deliver(reply, ViscaReplyError(
+                f'camera answered {hex_bytes(ex.packet)} with {reply.describe()}, a socket '
+                f'it does not have (only {", ".join(map(str, COMMAND_SOCKETS))})'))
+        logger.debug('VISCA ignored %s: no such socket', reply.describe())
 
     def _unmatched(self, reply: Reply, why: str) -> None:
         self._counters.add('unmatched')

@@ -102,6 +102,11 @@ Inquiries (socket 0, no ACK; answered in standby and during initialisation)
 Faults (for tests, thread-safe)
     ``faults.drop_probability`` / ``garble_probability`` (flip one bit or
     insert 1-3 random bytes) / ``delay_s`` apply to each reply;
+    ``faults.bad_position_probability`` (impossible position answers),
+    ``lose_completions``, ``bad_ack_socket_probability`` (ACKs on sockets
+    0, 3..9), ``error_only`` (every addressed packet answered with one
+    error code, nothing done) and ``phantom_ack_interval_s`` (ACKs never
+    completed) are the broken camera of issue 10 (see :class:`Faults`);
     :meth:`reply_to_wrong_socket_once` swaps sockets 1 and 2 in the next
     ACK, completion or socket error; :meth:`send_garbage` and
     :meth:`send_network_change` write at once; :meth:`vanish` closes the pty
@@ -128,10 +133,23 @@ from typing import Callable, Deque, Mapping, Optional, Tuple
 
 from .emulator_device import EmulatedDevice, HeadState, SOCKETS
 from .emulator_protocol import ViscaResponder
-from .protocol import BROADCAST, MAX_PACKET, network_change, PacketFramer
+from .protocol import (ack, BROADCAST, encode_nibbles, error, ERROR_NOT_EXECUTABLE,
+                       MAX_PACKET, network_change, PacketFramer, TERMINATOR)
 
 INBOX_LIMIT = 32
 DEFAULT_BAUD = 9600
+
+# Position answers a broken camera was seen to send (issue 10): pan -8000h (-65 rad),
+# pan 1000 units (113.6 deg), tilt 396 units (33 deg), and a nibble byte above 0F.
+_BAD_POSITIONS = (
+    encode_nibbles(-0x8000) + encode_nibbles(0),
+    encode_nibbles(1000) + encode_nibbles(0),
+    encode_nibbles(0) + encode_nibbles(396),
+    encode_nibbles(-2000) + encode_nibbles(-1000),
+    bytes((0x00, 0x13, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00)),
+)
+# Sockets the EVI-D31 does not have.
+_ABSENT_SOCKETS = (0, 3, 4, 5, 6, 7, 8, 9)
 
 
 @dataclass(frozen=True)
@@ -152,22 +170,39 @@ class EmulatorStats:
 
 class Faults:
     """
-    Fault injection knobs, read by the emulator at every reply.
+    Fault injection knobs, read by the emulator at every packet and reply.
+
+    * ``drop_probability``, ``garble_probability`` (flip one bit or insert
+      1-3 random bytes), ``delay_s``: every reply;
+    * ``bad_position_probability``: a position answer says an impossible
+      position instead (beyond the travel, -8000h, a nibble byte above 0F);
+    * ``lose_completions``: completions are never sent (the camera's socket
+      is free all the same);
+    * ``bad_ack_socket_probability``: an ACK names a socket the camera does
+      not have (0, 3..9);
+    * ``error_only``: an error code (e.g. ``ERROR_SYNTAX``): every packet
+      addressed to the camera is answered with that error only and does
+      nothing (broadcasts still come back);
+    * ``phantom_ack_interval_s``: every so often, ACKs on sockets 1 and 2
+      that no command caused and no completion follows.
 
     Assigning an attribute is atomic, so tests may change them while the
     emulator runs.
     """
 
     def __init__(self) -> None:
-        self.drop_probability = 0.0
-        self.garble_probability = 0.0
-        self.delay_s = 0.0
+        self.clear()
 
     def clear(self) -> None:
         """Switch every fault off."""
         self.drop_probability = 0.0
         self.garble_probability = 0.0
         self.delay_s = 0.0
+        self.bad_position_probability = 0.0
+        self.lose_completions = False
+        self.bad_ack_socket_probability = 0.0
+        self.error_only: Optional[int] = None
+        self.phantom_ack_interval_s = 0.0
 
 
 class EmulatedEviD31:
@@ -218,6 +253,7 @@ class EmulatedEviD31:
         self._line_free = 0.0
         self._silent = False
         self._wrong_socket_once = False
+        self._phantom_at = 0.0
         # Statistics.
         self._counts = collections.Counter()
         self._errors = collections.Counter()
@@ -469,8 +505,21 @@ class EmulatedEviD31:
         """Run one video field: completions first, then at most one received packet."""
         for packet in self._responder.completions(now):
             self._reply(packet, now)
+        interval = self.faults.phantom_ack_interval_s
+        if interval > 0.0 and now >= self._phantom_at:
+            self._phantom_at = now + interval
+            address = self._device.reply_address()
+            for socket in SOCKETS:
+                self._send_now(ack(address, socket), now)
         if self._inbox and self._inbox[0][0] <= now:
             _, packet = self._inbox.popleft()
+            code, address = self.faults.error_only, self._device.address
+            if code is not None and packet is not None and address is not None \
+                    and packet[0] == 0x80 | address:
+                self._counts['error_only'] += 1
+                socket = 1 if code == ERROR_NOT_EXECUTABLE else 0
+                self._reply(error(address, socket, code), now)
+                return
             for reply in self._responder.handle(packet, now):
                 self._reply(reply, now)
 
@@ -509,6 +558,10 @@ class EmulatedEviD31:
                 and packet[1] & 0x0F in SOCKETS:
             self._wrong_socket_once = False
             packet = bytes((packet[0], packet[1] ^ 0x03)) + packet[2:]
+        packet = self._fault(packet)
+        if packet is None:
+            self._counts['dropped'] += 1
+            return
         drop, garble = self.faults.drop_probability, self.faults.garble_probability
         if drop > 0.0 and self._rng.random() < drop:
             self._counts['dropped'] += 1
@@ -523,6 +576,22 @@ class EmulatedEviD31:
         # Explicit sends bypass the reply faults; without a pty they go nowhere.
         if self._master is not None:
             self._outbox.append((now, packet))
+
+    def _fault(self, packet: bytes) -> Optional[bytes]:
+        """Apply the reply faults that depend on what the reply is (None: not sent)."""
+        faults, rng = self.faults, self._rng
+        if packet[0] == BROADCAST or len(packet) < 3:
+            return packet
+        kind, socket = packet[1] >> 4, packet[1] & 0x0F
+        if kind == 0x5 and socket in SOCKETS and len(packet) == 3 and faults.lose_completions:
+            return None
+        if kind == 0x4 and len(packet) == 3 and faults.bad_ack_socket_probability > 0.0 \
+                and rng.random() < faults.bad_ack_socket_probability:
+            return bytes((packet[0], 0x40 | rng.choice(_ABSENT_SOCKETS), TERMINATOR))
+        if packet[1] == 0x50 and len(packet) == 11 and faults.bad_position_probability > 0.0 \
+                and rng.random() < faults.bad_position_probability:
+            return packet[:2] + rng.choice(_BAD_POSITIONS) + bytes((TERMINATOR,))
+        return packet
 
     def _garble(self, packet: bytes) -> bytes:
         data = bytearray(packet)

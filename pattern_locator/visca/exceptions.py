@@ -19,6 +19,10 @@ class ViscaTimeout(ViscaError):
     """The camera did not answer (or complete) in time."""
 
 
+class ViscaSocketsBusy(ViscaTimeout):
+    """Both command sockets hold one of our commands: the new one was not sent."""
+
+
 class ViscaCommandError(ViscaError):
     """
     The camera answered a request with an error reply.

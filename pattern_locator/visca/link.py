@@ -4,12 +4,15 @@ The serial link: the port opened raw at 9600 8N1, one reader thread, reopened wh
 The reconnect loop has the nmea_navsat_driver TCP node's shape: an outer
 loop (re)opens the port around an inner read loop that breaks out on a port
 error. When the port fails the link closes it, tells its owner (who fails
-every waiter at once) and reopens it with a backoff doubling from
-``reconnect_initial_s`` to ``reconnect_max_s``. A second thread runs
+every waiter at once) and reopens it after ``reconnect_initial_s``; while
+the port cannot be opened (unplugged) the attempts back off, doubling up to
+``reconnect_max_s``. Why an open failed is said in one line
+(:func:`open_error`) and kept in ``last_error``. A second thread runs
 callbacks (``call_soon``) so they may use the link's owner: they never run
 on the reader.
 """
 
+import errno
 import logging
 import queue
 import threading
@@ -22,6 +25,23 @@ from .protocol import hex_bytes
 from .stats import Counters
 
 logger = logging.getLogger(__name__)
+
+
+def open_error(port: str, exc: BaseException) -> str:
+    """Return why ``port`` could not be opened, in one line a user can act on."""
+    code = getattr(exc, 'errno', None)
+    text = str(exc)
+    if code == errno.ENOENT:
+        return f'VISCA port {port} does not exist'
+    if code in (errno.EACCES, errno.EPERM):
+        return f'no permission to open VISCA port {port} (is the user in the dialout group?)'
+    if 'exclusively lock' in text or code == errno.EBUSY:
+        return f'VISCA port {port} is in use by another program'
+    if code == errno.EISDIR:
+        return f'VISCA port {port} is a directory, not a serial port'
+    if 'configure port' in text or code == errno.ENOTTY:
+        return f'VISCA port {port} is not a serial port ({text})'
+    return f'cannot open VISCA port {port}: {text}'
 
 
 class SerialLink:
@@ -189,7 +209,7 @@ class SerialLink:
                 # A factory (or platform) without exclusive access.
                 ser = self._factory(**kwargs)
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise ViscaConnectionError(f'cannot open VISCA port {self.port}: {exc}') from exc
+            raise ViscaConnectionError(open_error(self.port, exc)) from exc
         try:
             ser.dtr = True
         except (serial.SerialException, OSError):
@@ -214,7 +234,9 @@ class SerialLink:
                 try:
                     ser = self._open_port()
                 except ViscaConnectionError as exc:
-                    logger.debug('%s', exc)
+                    if str(exc) != self._last_error:
+                        logger.warning('%s (retrying)', exc)
+                    self._last_error = str(exc)
                     self._back_off()
                     continue
                 with self._lock:
@@ -222,6 +244,7 @@ class SerialLink:
                         self._close_port(ser)
                         return
                     self._serial, self._connected = ser, True
+                    self._backoff_s = self.reconnect_initial_s
                 self._counters.add('reconnects')
                 logger.info('VISCA port %s reopened', self.port)
                 self._on_reopen()
@@ -232,8 +255,8 @@ class SerialLink:
             # Not under a writer's feet: a write takes write_timeout at most.
             with self._write_lock:
                 self._close_port(ser)
-            if not self._closing.is_set():
-                self._back_off()
+            # The port opened fine last time: try again soon (the backoff is for failed opens).
+            self._closing.wait(self.reconnect_initial_s)
 
     def _back_off(self) -> None:
         with self._lock:

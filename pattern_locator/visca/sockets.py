@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Callable, Dict, List, Optional
 
-from .exceptions import ViscaCancelled, ViscaConnectionError, ViscaTimeout
+from .exceptions import ViscaCancelled, ViscaConnectionError, ViscaSocketsBusy, ViscaTimeout
 from .protocol import hex_bytes, Reply, ViscaError
 from .stats import Counters
 
@@ -37,6 +37,7 @@ class CommandResult:
         self.socket = socket
         self.ack = ack
         self.sent_at = time.monotonic()
+        self.acked_at = self.sent_at
         self.expires_at = expires_at
         self.completion: Optional[Reply] = None
         self.error: Optional[ViscaError] = None
@@ -71,10 +72,11 @@ class CommandResult:
         self.completion, self.error = completion, error
         self.completed_at = time.monotonic()
         self._event.set()
-        if error is not None and self.detached and not isinstance(
-                error, (ViscaCancelled, ViscaConnectionError)):
-            logger.warning('VISCA command %s failed after its ACK: %s',
-                           hex_bytes(self.packet), error)
+        if error is not None and self.detached:
+            # A refusal after the ACK is news; cancelled, lost and expired ones are counted.
+            quiet = isinstance(error, (ViscaCancelled, ViscaConnectionError, ViscaTimeout))
+            logger.log(logging.DEBUG if quiet else logging.WARNING,
+                       'VISCA command %s failed after its ACK: %s', hex_bytes(self.packet), error)
 
     def __repr__(self) -> str:
         state = 'ok' if self.ok else ('error' if self.error else 'running')
@@ -86,8 +88,11 @@ class SocketTable:
     The camera's command sockets as far as our replies tell (thread-safe).
 
     Reservations count commands sent and not yet answered; booked records
-    the commands the camera ACKed. A socket counts as busy until its
-    command completes, fails or passes its ``expires_at``.
+    the commands the camera ACKed. A socket is busy until its command
+    completes or fails; a command still booked at its ``expires_at`` (the
+    longest the camera can take for it) lost its completion: it fails with
+    ViscaTimeout and the socket is free again (counted as
+    ``expired_sockets``).
     """
 
     def __init__(self, counters: Counters) -> None:
@@ -110,13 +115,13 @@ class SocketTable:
             while True:
                 check()
                 now = time.monotonic()
-                busy = self._reserved + sum(
-                    1 for r in self._records.values() if not r.done and r.expires_at > now)
+                self._expire(now)
+                busy = self._reserved + len(self._records)
                 if busy < SOCKETS:
                     self._reserved += 1
                     return
                 if now >= deadline:
-                    raise ViscaTimeout(
+                    raise ViscaSocketsBusy(
                         f'both camera sockets busy ({sorted(self._records)}): could not '
                         f'send {hex_bytes(packet)}')
                 # Short waits: a socket may also free itself by expiring.
@@ -196,9 +201,25 @@ class SocketTable:
     def in_use(self) -> List[int]:
         """Return the sockets that hold one of our commands."""
         with self._cond:
+            self._expire(time.monotonic())
             return sorted(s for s, r in self._records.items() if not r.done)
 
     def running(self) -> Dict[int, CommandResult]:
         """Return socket -> command for the commands not yet completed."""
         with self._cond:
+            self._expire(time.monotonic())
             return {s: r for s, r in self._records.items() if not r.done}
+
+    def _expire(self, now: float) -> None:
+        """Free the sockets whose command is past its longest time (lock held)."""
+        for socket, record in list(self._records.items()):
+            if record.done:
+                del self._records[socket]
+            elif record.expires_at <= now:
+                del self._records[socket]
+                self._counters.add('expired_sockets')
+                what = hex_bytes(record.packet) if record.packet else 'an unknown command'
+                record.finish(error=ViscaTimeout(
+                    f'no completion for {what} on socket {socket} within '
+                    f'{record.expires_at - record.acked_at:.2f} s of its ACK: socket freed'))
+                self._cond.notify_all()

@@ -8,7 +8,14 @@ from typing import Dict
 
 @dataclass(frozen=True)
 class TransportStats:
-    """A snapshot of the transport's counters."""
+    """
+    A snapshot of the transport's counters.
+
+    ``bad_socket_replies``: ACKs, completions and errors naming a socket the
+    camera does not have (ignored). ``expired_sockets``: commands whose
+    completion never came, their socket taken as free after the command's
+    longest time.
+    """
 
     sent: int = 0
     replies: int = 0
@@ -25,6 +32,8 @@ class TransportStats:
     buffer_full_resends: int = 0
     connection_losses: int = 0
     reconnects: int = 0
+    bad_socket_replies: int = 0
+    expired_sockets: int = 0
 
 
 class Counters:
@@ -61,4 +70,5 @@ class Counters:
                 unmatched=c['unmatched'], lost_completions=c['lost_completions'],
                 network_changes=c['network_changes'],
                 buffer_full_resends=c['buffer_full_resends'],
-                connection_losses=c['connection_losses'], reconnects=c['reconnects'])
+                connection_losses=c['connection_losses'], reconnects=c['reconnects'],
+                bad_socket_replies=c['bad_socket_replies'], expired_sockets=c['expired_sockets'])

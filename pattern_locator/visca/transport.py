@@ -25,26 +25,27 @@ us.
 
 import collections
 import logging
+import math
 import threading
 import time
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Sequence
 
 import serial
 
 from .demux import Exchange, ReplyDemux
 from .exceptions import (command_error, ViscaBufferFull, ViscaCancelled, ViscaCommandError,
                          ViscaConnectionError, ViscaMessageLengthError, ViscaNoSocket,
-                         ViscaNotExecutable, ViscaSyntaxError, ViscaTimeout)
+                         ViscaNotExecutable, ViscaSocketsBusy, ViscaSyntaxError, ViscaTimeout)
 from .link import SerialLink
-from .protocol import (BROADCAST, cancel as cancel_packet, ERROR_CANCELLED, hex_bytes, Reply,
-                       reply_header, ViscaError)
+from .protocol import (BROADCAST, cancel as cancel_packet, ERROR_CANCELLED, hex_bytes,
+                       INSTANT_COMMAND_S, Reply, reply_header, ViscaError, ViscaReplyError)
 from .sockets import CommandResult, SocketTable
 from .stats import Counters, TransportStats
 
 __all__ = ['command_error', 'CommandResult', 'TransportStats', 'ViscaBufferFull',
            'ViscaCancelled', 'ViscaCommandError', 'ViscaConnectionError', 'ViscaError',
-           'ViscaMessageLengthError', 'ViscaNoSocket', 'ViscaNotExecutable', 'ViscaSyntaxError',
-           'ViscaTimeout', 'ViscaTransport']
+           'ViscaMessageLengthError', 'ViscaNoSocket', 'ViscaNotExecutable', 'ViscaReplyError',
+           'ViscaSocketsBusy', 'ViscaSyntaxError', 'ViscaTimeout', 'ViscaTransport']
 
 logger = logging.getLogger(__name__)
 
@@ -84,18 +85,22 @@ class ViscaTransport:
     flow control, DTR on, opened exclusively. ``reply_timeout_s`` bounds the
     wait for a first reply (ACK, answer), ``completion_timeout_s`` the default
     wait for a completion. ``max_timeouts`` consecutive reply timeouts count as
-    a dead link: the port is closed and reopened. ``on_network_change`` and
-    ``on_reconnect`` run on the transport's callback thread and may call it.
+    a dead link: the port is closed and reopened. ``unknown_ack_hold_s``: how
+    long an ACK that no command waited for keeps its socket booked (a wrong
+    guess costs one buffer-full reply, which :meth:`command` handles).
+    ``on_network_change`` and ``on_reconnect`` run on the transport's callback
+    thread and may call it.
     """
 
     def __init__(self, port: str, baud: int = 9600, address: int = 1,
                  reply_timeout_s: float = 1.0, completion_timeout_s: float = 30.0,
                  serial_factory: Callable[..., serial.Serial] = serial.Serial,
                  max_timeouts: int = 3, max_resends: int = 3,
-                 reconnect_initial_s: float = 0.1, reconnect_max_s: float = 2.0,
+                 reconnect_initial_s: float = 0.1, reconnect_max_s: float = 0.5,
                  on_reconnect: Optional[Callable[[], None]] = None,
                  on_network_change: Optional[Callable[[], None]] = None,
-                 read_timeout_s: float = 0.05) -> None:
+                 read_timeout_s: float = 0.05,
+                 unknown_ack_hold_s: float = INSTANT_COMMAND_S) -> None:
         reply_header(address)  # validates 1..7
         self.port = port
         self.baud = baud
@@ -108,7 +113,7 @@ class ViscaTransport:
         self.on_network_change = on_network_change
         self._counters = Counters()
         self._sockets = SocketTable(self._counters)
-        self._demux = ReplyDemux(address, self._sockets, self._counters, completion_timeout_s,
+        self._demux = ReplyDemux(address, self._sockets, self._counters, unknown_ack_hold_s,
                                  self._network_changed)
         self._link = SerialLink(port, baud, serial_factory, read_timeout_s,
                                 max(1.0, reply_timeout_s), reconnect_initial_s, reconnect_max_s,
@@ -116,6 +121,7 @@ class ViscaTransport:
         self._exchange_lock = _FairLock()
         self._timeouts_lock = threading.Lock()
         self._consecutive_timeouts = 0
+        self._closing = False
 
     # Life cycle ---------------------------------------------------------------------------
 
@@ -126,12 +132,33 @@ class ViscaTransport:
         self._demux.reset()
         with self._timeouts_lock:
             self._consecutive_timeouts = 0
+        self._closing = False
         if self._link.open():
             logger.info('VISCA port %s open (%d baud, camera %d)', self.port, self.baud,
                         self.address)
 
-    def close(self) -> None:
-        """Fail every waiter, stop the threads and close the port (idempotent)."""
+    def close(self, final: Sequence[bytes] = (), final_timeout_s: float = 0.2) -> None:
+        """
+        Fail every waiter, send the ``final`` packets, stop the threads, close the port.
+
+        Any thread may call it, while others wait on replies: their requests
+        fail at once with ViscaConnectionError and new ones are refused.
+        ``final`` (a Stop, a Cancel) go out in order, each waiting at most
+        ``final_timeout_s`` for its first reply, so closing takes about
+        ``len(final) * final_timeout_s`` at worst. Idempotent.
+        """
+        if not self._link.is_open:
+            return
+        self._closing = True
+        closing = ViscaConnectionError(f'VISCA port {self.port}: closing')
+        self._demux.fail_pending(closing)
+        self._sockets.clear(lambda record: closing)
+        for packet in final if self._link.connected else ():
+            try:
+                self._final_exchange(bytes(packet), final_timeout_s)
+            except ViscaError as exc:
+                logger.info('VISCA port %s: %s not answered while closing: %s', self.port,
+                            hex_bytes(packet), exc)
         if self._link.close():
             logger.info('VISCA port %s closed', self.port)
 
@@ -161,6 +188,12 @@ class ViscaTransport:
     def last_error(self) -> str:
         """Return why the connection was last lost ('' if never)."""
         return self._link.last_error
+
+    @property
+    def last_reply_age_s(self) -> float:
+        """Return the seconds since the camera's last reply of any kind (inf: none yet)."""
+        at = self._demux.last_reply_at
+        return math.inf if at is None else time.monotonic() - at
 
     @property
     def sockets_in_use(self) -> List[int]:
@@ -196,26 +229,37 @@ class ViscaTransport:
         ex = self._exchange(Exchange('inquiry', bytes(packet), answer_length), timeout)
         return ex.reply
 
-    def command(self, packet: bytes, wait: bool = True,
-                timeout: Optional[float] = None) -> CommandResult:
+    def command(self, packet: bytes, wait: bool = True, timeout: Optional[float] = None,
+                duration_s: Optional[float] = None,
+                socket_wait_s: Optional[float] = None) -> CommandResult:
         """
         Send a command; return once it is ACKed, or completed when ``wait``.
 
         ``timeout`` (default ``completion_timeout_s``) bounds the wait for a
         free socket and for the completion; the ACK itself must come within
-        ``reply_timeout_s``. A buffer-full reply is retried after the next
-        completion (at most ``max_resends`` times). Error replies raise the
-        matching :class:`ViscaCommandError` subclass.
+        ``reply_timeout_s``. ``duration_s`` (default ``timeout``) is the
+        longest the camera can take for this command: a completion that has
+        not come by then is lost, and its socket is taken as free.
+        ``socket_wait_s`` (default ``timeout``) bounds the wait for a free
+        socket alone: 0 raises :class:`ViscaSocketsBusy` at once when both are
+        busy (a control loop that sends again next cycle). A buffer-full
+        reply is retried after the next completion (at most ``max_resends``
+        times). Error replies raise the matching :class:`ViscaCommandError`
+        subclass; an ACK naming a socket the camera does not have raises
+        :class:`ViscaReplyError`.
         """
         packet = bytes(packet)
         timeout = self.completion_timeout_s if timeout is None else timeout
-        deadline = time.monotonic() + timeout
+        duration_s = timeout if duration_s is None else duration_s
+        start = time.monotonic()
+        deadline = start + timeout
+        socket_deadline = deadline if socket_wait_s is None else start + socket_wait_s
         resends = 0
         while True:
-            self._sockets.reserve(packet, deadline, self._link.check)
+            self._sockets.reserve(packet, min(deadline, socket_deadline), self._check)
             completions_before = self._sockets.completions_seen()
             try:
-                ex = self._exchange(Exchange('command', packet, expires_s=timeout), None)
+                ex = self._exchange(Exchange('command', packet, expires_s=duration_s), None)
             except ViscaBufferFull:
                 if resends >= self.max_resends:
                     raise
@@ -224,7 +268,7 @@ class ViscaTransport:
                 self._sockets.wait_for_completion(
                     completions_before,
                     min(self.reply_timeout_s, max(0.0, deadline - time.monotonic())),
-                    lambda: self._link.connected)
+                    lambda: self._link.connected and not self._closing)
                 continue
             finally:
                 self._sockets.release()
@@ -247,29 +291,50 @@ class ViscaTransport:
 
     # Internals ----------------------------------------------------------------------------
 
+    def _check(self) -> None:
+        if self._closing:
+            raise ViscaConnectionError(f'VISCA port {self.port}: closing')
+        self._link.check()
+
     def _exchange(self, ex: Exchange, timeout: Optional[float]) -> Exchange:
         timeout = self.reply_timeout_s if timeout is None else timeout
-        self._link.check()
+        self._check()
         # The holder keeps the line for one reply timeout at most.
         if not self._exchange_lock.acquire(timeout=4 * self.reply_timeout_s + timeout):
-            self._link.check()
+            self._check()
             raise ViscaTimeout(f'VISCA line busy: could not send {hex_bytes(ex.packet)}')
         try:
-            self._demux.begin(ex)
-            try:
-                # Lost between check and begin: the loss did not see ex, so look again.
-                self._link.check()
-                self._link.write(ex.packet)
-                ex.event.wait(timeout)
-            finally:
-                self._demux.end(ex)
-            if not ex.event.is_set():
-                self._note_timeout(ex, timeout)
-            if ex.error is not None:
-                raise ex.error
-            return ex
+            return self._exchange_locked(ex, timeout)
         finally:
             self._exchange_lock.release()
+
+    def _final_exchange(self, packet: bytes, timeout: float) -> None:
+        """Send one packet while closing (others are refused) and wait for its first reply."""
+        if not self._exchange_lock.acquire(timeout=timeout):
+            raise ViscaTimeout(f'VISCA line busy: could not send {hex_bytes(packet)}')
+        try:
+            kind = 'cancel' if len(packet) == 3 and packet[1] >> 4 == 0x2 else 'command'
+            ex = Exchange(kind, packet, cancel_socket=packet[1] & 0x0F, expires_s=timeout)
+            self._link.check()
+            self._exchange_locked(ex, timeout, final=True)
+        finally:
+            self._exchange_lock.release()
+
+    def _exchange_locked(self, ex: Exchange, timeout: float, final: bool = False) -> Exchange:
+        self._demux.begin(ex)
+        try:
+            # Lost (or closing) between check and begin: that did not see ex, so look again.
+            if not final:
+                self._check()
+            self._link.write(ex.packet)
+            ex.event.wait(timeout)
+        finally:
+            self._demux.end(ex)
+        if not ex.event.is_set():
+            self._note_timeout(ex, timeout)
+        if ex.error is not None:
+            raise ex.error
+        return ex
 
     def _note_timeout(self, ex: Exchange, timeout: float) -> None:
         self._counters.add('timeouts')

@@ -180,7 +180,7 @@ class HeadLoop:
         """Return the driver's health for diagnostics: OK only while fresh positions flow."""
         camera = self.camera
         if self._stopped.is_set():
-            return self._health.assess(False, False, 'camera driver stopped')
+            return self._health.stopped('camera driver stopped')
         return self._health.assess(camera.connected, camera.ready, camera.transport.last_error,
                                    camera.transport.last_reply_age_s)
 

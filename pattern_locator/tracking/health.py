@@ -36,7 +36,7 @@ _WHY = {
     OTHER: 'the position inquiry fails',
 }
 # Reasons quote at most this much of an exception's message.
-_QUOTE_CHARS = 80
+_QUOTE_CHARS = 160
 
 
 def _quote(text: str) -> str:
@@ -142,7 +142,7 @@ class HealthMonitor:
             return HeadHealth(level, message, age, rate, failures)
 
         if not connected:
-            return health(ERROR, f'no camera: {_quote(link_error) or "port not open"}; '
+            return health(ERROR, f'camera link down: {_quote(link_error) or "port not open"}; '
                                  'reconnecting')
         if not ready:
             if reply_age_s > self.stale_after_s:
@@ -168,6 +168,14 @@ class HealthMonitor:
         if kind == SILENCE and reply_age_s < self.stale_after_s:
             kind = OTHER  # replies come, just not to the position inquiry
         return health(ERROR, f'{since}: {_WHY.get(kind, _WHY[OTHER])} ({message})')
+
+    def stopped(self, why: str) -> HeadHealth:
+        """Return an ERROR saying ``why`` (the driver stopped: no positions will come)."""
+        now = self._clock()
+        with self._lock:
+            self._trim(now)
+            age = math.inf if self._last_position is None else now - self._last_position
+            return HeadHealth(ERROR, why, age, 0.0, len(self._failures))
 
     def _trim(self, now: float) -> None:
         cut = now - self.window_s

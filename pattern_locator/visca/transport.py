@@ -343,7 +343,8 @@ class ViscaTransport:
             dead = self._consecutive_timeouts >= self.max_timeouts
         message = f'no reply to {hex_bytes(ex.packet)} within {timeout:.2f} s'
         if dead:
-            self._link.lose(f'{self.max_timeouts} requests in a row got no reply', None)
+            self._link.lose(f'the camera did not answer {self.max_timeouts} requests in a row',
+                            None)
         raise ViscaTimeout(message)
 
     # Link callbacks -----------------------------------------------------------------------

@@ -12,8 +12,10 @@ Where to look: :mod:`~pattern_locator.visca.emulator_motion` is the motion
 model (axes in continuous time, limits), :mod:`~pattern_locator.visca.emulator_device`
 the device state (power, address, sockets, initialisation) and what each
 command does, :mod:`~pattern_locator.visca.emulator_protocol` the protocol
-handling (packets in, replies out, in the order below); this module is the
-line (pty, pacing, one packet per field) and the fault injection.
+handling (packets in, replies out, in the order below),
+:mod:`~pattern_locator.visca.emulator_line` the pty paced at 9600 baud and
+:mod:`~pattern_locator.visca.emulator_faults` the fault injection; this
+module runs them on one thread, one packet per video field.
 
 Timing
     One received packet (command, inquiry, cancel or broadcast) is processed
@@ -119,37 +121,23 @@ Faults (for tests, thread-safe)
 
 import collections
 from dataclasses import dataclass
-import errno
 import os
-import random
 import select
 import signal
 import sys
-import termios
 import threading
 import time
-import tty
 from typing import Callable, Deque, Mapping, Optional, Tuple
 
 from .emulator_device import EmulatedDevice, HeadState, SOCKETS
+from .emulator_faults import FaultInjector, Faults
+from .emulator_line import PtyLine
 from .emulator_protocol import ViscaResponder
-from .protocol import (ack, BROADCAST, encode_nibbles, error, ERROR_NOT_EXECUTABLE,
-                       MAX_PACKET, network_change, PacketFramer, TERMINATOR)
+from .protocol import ack, BROADCAST, network_change
 
-INBOX_LIMIT = 32
 DEFAULT_BAUD = 9600
 
-# Position answers a broken camera was seen to send (issue 10): pan -8000h (-65 rad),
-# pan 1000 units (113.6 deg), tilt 396 units (33 deg), and a nibble byte above 0F.
-_BAD_POSITIONS = (
-    encode_nibbles(-0x8000) + encode_nibbles(0),
-    encode_nibbles(1000) + encode_nibbles(0),
-    encode_nibbles(0) + encode_nibbles(396),
-    encode_nibbles(-2000) + encode_nibbles(-1000),
-    bytes((0x00, 0x13, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00)),
-)
-# Sockets the EVI-D31 does not have.
-_ABSENT_SOCKETS = (0, 3, 4, 5, 6, 7, 8, 9)
+__all__ = ['EmulatedEviD31', 'EmulatorStats', 'Faults', 'HeadState', 'run_fake_camera']
 
 
 @dataclass(frozen=True)
@@ -168,43 +156,6 @@ class EmulatorStats:
     errors_by_code: Mapping[int, int]
 
 
-class Faults:
-    """
-    Fault injection knobs, read by the emulator at every packet and reply.
-
-    * ``drop_probability``, ``garble_probability`` (flip one bit or insert
-      1-3 random bytes), ``delay_s``: every reply;
-    * ``bad_position_probability``: a position answer says an impossible
-      position instead (beyond the travel, -8000h, a nibble byte above 0F);
-    * ``lose_completions``: completions are never sent (the camera's socket
-      is free all the same);
-    * ``bad_ack_socket_probability``: an ACK names a socket the camera does
-      not have (0, 3..9);
-    * ``error_only``: an error code (e.g. ``ERROR_SYNTAX``): every packet
-      addressed to the camera is answered with that error only and does
-      nothing (broadcasts still come back);
-    * ``phantom_ack_interval_s``: every so often, ACKs on sockets 1 and 2
-      that no command caused and no completion follows.
-
-    Assigning an attribute is atomic, so tests may change them while the
-    emulator runs.
-    """
-
-    def __init__(self) -> None:
-        self.clear()
-
-    def clear(self) -> None:
-        """Switch every fault off."""
-        self.drop_probability = 0.0
-        self.garble_probability = 0.0
-        self.delay_s = 0.0
-        self.bad_position_probability = 0.0
-        self.lose_completions = False
-        self.bad_ack_socket_probability = 0.0
-        self.error_only: Optional[int] = None
-        self.phantom_ack_interval_s = 0.0
-
-
 class EmulatedEviD31:
     """
     A Sony EVI-D31 answering VISCA on a pseudo-terminal; see the module docstring.
@@ -212,9 +163,10 @@ class EmulatedEviD31:
     ``start()`` opens the pty and the emulator thread; open :attr:`port`
     with pyserial at 9600 baud. Times come from ``time.monotonic()``. The
     camera itself is :class:`~pattern_locator.visca.emulator_device.EmulatedDevice`
-    behind a :class:`~pattern_locator.visca.emulator_protocol.ViscaResponder`;
-    this class adds the line (pty, 9600-baud pacing, one packet per video
-    field) and the faults.
+    behind a :class:`~pattern_locator.visca.emulator_protocol.ViscaResponder`,
+    the line a :class:`~pattern_locator.visca.emulator_line.PtyLine`, the faults
+    a :class:`~pattern_locator.visca.emulator_faults.FaultInjector`; this class
+    runs them on one thread, one packet per video field.
     """
 
     def __init__(self, field_rate_hz: float = 50.0, init_s: float = 2.0, reset_s: float = 2.5,
@@ -224,39 +176,24 @@ class EmulatedEviD31:
         if field_rate_hz <= 0.0:
             raise ValueError(f'field rate {field_rate_hz} Hz is not positive')
         self.field_rate_hz = float(field_rate_hz)
-        self.pace_output = bool(pace_output)
         self.link_path = os.fspath(link_path) if link_path is not None else None
         # 8N1: ten bit times per byte.
-        self.byte_s = 10.0 / float(baud)
+        self._line = PtyLine(self.link_path, 10.0 / float(baud), bool(pace_output))
         self.faults = Faults()
+        self._injector = FaultInjector(self.faults, seed)
         self._device = EmulatedDevice(max(0.0, float(init_s)), max(0.0, float(reset_s)),
                                       float(zoom_full_s), bool(require_address_set))
         self._responder = ViscaResponder(self._device)
-        self._rng = random.Random(seed)
         self._lock = threading.RLock()
         self._thread: Optional[threading.Thread] = None
         self._stopping = False
         self._requests: Deque[Tuple[Callable[[], None], threading.Event]] = collections.deque()
         self._wake_r: Optional[int] = None
         self._wake_w: Optional[int] = None
-        self._master: Optional[int] = None
-        self._slave: Optional[int] = None
-        self._slave_name: Optional[str] = None
-        # Input side.
-        self._framer = PacketFramer()
-        self._inbox: Deque[Tuple[float, Optional[bytes]]] = collections.deque()
-        self._in_line_free = 0.0
-        # Output side: packets waiting (ready time, bytes), the packet on the wire.
-        self._outbox: Deque[Tuple[float, bytes]] = collections.deque()
-        self._wire: Deque[int] = collections.deque()
-        self._wire_ready = 0.0
-        self._line_free = 0.0
         self._silent = False
-        self._wrong_socket_once = False
         self._phantom_at = 0.0
-        # Statistics.
-        self._counts = collections.Counter()
-        self._errors = collections.Counter()
+        self._counts: 'collections.Counter[str]' = collections.Counter()
+        self._errors: 'collections.Counter[int]' = collections.Counter()
 
     # Life cycle ---------------------------------------------------------------------------
 
@@ -270,7 +207,7 @@ class EmulatedEviD31:
                 raise FileExistsError(f'{self.link_path} exists and is not a symlink')
             self._wake_r, self._wake_w = os.pipe()
             os.set_blocking(self._wake_w, False)
-            self._open_pty()
+            self._line.open()
             self._power_up(time.monotonic())
             self._thread = threading.Thread(target=self._run, name='fake-evi-d31', daemon=True)
             self._thread.start()
@@ -284,7 +221,7 @@ class EmulatedEviD31:
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5.0)
         with self._lock:
-            self._close_pty()
+            self._line.close()
             for fd in (self._wake_r, self._wake_w):
                 if fd is not None:
                     os.close(fd)
@@ -303,11 +240,7 @@ class EmulatedEviD31:
     @property
     def port(self) -> str:
         """Return the path to open: the symlink if ``link_path`` was given, else the pty."""
-        if self.link_path:
-            return self.link_path
-        if self._slave_name is None:
-            raise RuntimeError('the emulated camera has no pty (not started, or vanished)')
-        return self._slave_name
+        return self._line.port
 
     @property
     def address(self) -> Optional[int]:
@@ -334,32 +267,33 @@ class EmulatedEviD31:
     def stats(self) -> EmulatorStats:
         """Return a snapshot of the counters."""
         with self._lock:
-            c, handled = self._counts, self._responder.counts
+            line, handled, faults = self._line.counts, self._responder.counts, \
+                self._injector.counts
             return EmulatorStats(
-                packets_received=c['packets'], commands_received=handled['commands'],
+                packets_received=line['packets'], commands_received=handled['commands'],
                 inquiries_received=handled['inquiries'],
-                ignored_packets=c['ignored'] + handled['ignored'],
-                inbox_overflows=c['overflows'], junk_bytes=self._framer.junk_bytes,
-                replies_sent=c['sent'], replies_dropped=c['dropped'],
-                replies_garbled=c['garbled'], errors_by_code=dict(self._errors))
+                ignored_packets=line['ignored'] + handled['ignored'],
+                inbox_overflows=line['overflows'], junk_bytes=self._line.junk_bytes,
+                replies_sent=self._counts['sent'], replies_dropped=faults['dropped'],
+                replies_garbled=faults['garbled'], errors_by_code=dict(self._errors))
 
     # Fault injection ----------------------------------------------------------------------
 
     def reply_to_wrong_socket_once(self) -> None:
         """Swap sockets 1 and 2 in the next ACK, completion or socket error."""
         with self._lock:
-            self._wrong_socket_once = True
+            self._injector.wrong_socket_once = True
 
     def send_garbage(self, data: bytes) -> None:
         """Write ``data`` to the driver as they are (no faults applied)."""
         with self._lock:
-            self._send_now(bytes(data), time.monotonic())
+            self._line.send(bytes(data), time.monotonic())
         self._wake()
 
     def send_network_change(self) -> None:
         """Send Network Change ``z0 38 FF`` now (no faults applied)."""
         with self._lock:
-            self._send_now(network_change(self._device.reply_address()), time.monotonic())
+            self._line.send(network_change(self._device.reply_address()), time.monotonic())
         self._wake()
 
     def stop_answering(self, silent: bool = True) -> None:
@@ -367,11 +301,11 @@ class EmulatedEviD31:
         with self._lock:
             self._silent = bool(silent)
             if silent:
-                self._inbox.clear()
+                self._line.clear_inbox()
 
     def vanish(self) -> None:
         """Close the pty so the driver's port errors out, and remove the symlink."""
-        self._in_worker(self._close_pty)
+        self._in_worker(self._line.close)
 
     def restore(self) -> None:
         """Open a new pty after :meth:`vanish` and point the symlink at it."""
@@ -383,44 +317,11 @@ class EmulatedEviD31:
             self._power_up(time.monotonic())
         self._wake()
 
-    # Pty ----------------------------------------------------------------------------------
-
-    def _open_pty(self) -> None:
-        master, slave = os.openpty()
-        # Raw: no CR/LF or XON/XOFF translation and no echo (visca.md, "Serial line").
-        tty.setraw(slave)
-        attrs = termios.tcgetattr(slave)
-        attrs[4] = attrs[5] = termios.B9600
-        termios.tcsetattr(slave, termios.TCSANOW, attrs)
-        os.set_blocking(master, False)
-        self._master, self._slave = master, slave
-        self._slave_name = os.ttyname(slave)
-        if self.link_path:
-            temporary = f'{self.link_path}.{os.getpid()}.tmp'
-            if os.path.lexists(temporary):
-                os.unlink(temporary)
-            os.symlink(self._slave_name, temporary)
-            os.replace(temporary, self.link_path)
-        self._framer.reset()
-
-    def _close_pty(self) -> None:
-        if self.link_path and os.path.islink(self.link_path) \
-                and os.readlink(self.link_path) == self._slave_name:
-            os.unlink(self.link_path)
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                os.close(fd)
-        self._master = self._slave = self._slave_name = None
-        self._inbox.clear()
-        self._outbox.clear()
-        self._wire.clear()
-        self._framer.reset()
+    # Thread -------------------------------------------------------------------------------
 
     def _restore(self) -> None:
-        if self._master is None:
-            self._open_pty()
-
-    # Thread -------------------------------------------------------------------------------
+        if self._line.master is None:
+            self._line.open()
 
     def _wake(self) -> None:
         fd = self._wake_w
@@ -464,12 +365,12 @@ class EmulatedEviD31:
                     if next_field <= now:
                         # Fell behind (a stalled machine): resume the cadence from now.
                         next_field = now + period
-                self._pump_output(now)
+                self._line.pump(now)
                 wake_at = next_field
-                output_at = self._next_output_time()
+                output_at = self._line.next_output_time()
                 if output_at is not None:
                     wake_at = min(wake_at, output_at)
-                master = self._master
+                master = self._line.master
                 fds = [self._wake_r] + ([master] if master is not None else [])
             try:
                 readable, _, _ = select.select(fds, [], [], max(0.0, wake_at - time.monotonic()))
@@ -487,19 +388,19 @@ class EmulatedEviD31:
                     data = b''  # EIO/EAGAIN: nothing to read this time.
                 if data:
                     with self._lock:
-                        self._receive(data, time.monotonic())
+                        self._line.receive(data, time.monotonic(), discard=self._silent)
 
     # Camera -------------------------------------------------------------------------------
 
     def _power_up(self, now: float) -> None:
         self._device.power_up(now)
-        self._inbox.clear()
+        self._line.clear_inbox()
         if not self._silent:
-            self._send_now(network_change(1), now)
-        if self._thread is None and self._master is not None:
+            self._line.send(network_change(1), now)
+        if self._thread is None and self._line.master is not None:
             # At start() it goes out before the port can be opened (so the driver's open
             # flushes it, as with a camera powered before the driver): deterministic.
-            self._pump_output(float('inf'))
+            self._line.pump(float('inf'))
 
     def _field(self, now: float) -> None:
         """Run one video field: completions first, then at most one received packet."""
@@ -510,136 +411,23 @@ class EmulatedEviD31:
             self._phantom_at = now + interval
             address = self._device.reply_address()
             for socket in SOCKETS:
-                self._send_now(ack(address, socket), now)
-        if self._inbox and self._inbox[0][0] <= now:
-            _, packet = self._inbox.popleft()
-            code, address = self.faults.error_only, self._device.address
-            if code is not None and packet is not None and address is not None \
-                    and packet[0] == 0x80 | address:
-                self._counts['error_only'] += 1
-                socket = 1 if code == ERROR_NOT_EXECUTABLE else 0
-                self._reply(error(address, socket, code), now)
-                return
-            for reply in self._responder.handle(packet, now):
+                self._line.send(ack(address, socket), now)
+        if self._line.packet_due(now):
+            packet = self._line.next_packet()
+            refusal = self._injector.error_only(packet, self._device.address)
+            replies = [refusal] if refusal is not None else self._responder.handle(packet, now)
+            for reply in replies:
                 self._reply(reply, now)
 
-    # Input --------------------------------------------------------------------------------
-
-    def _receive(self, data: bytes, now: float) -> None:
-        for byte in data:
-            overlong = self._framer.overlong_packets
-            packets = self._framer.feed(bytes((byte,)))
-            if self._framer.overlong_packets != overlong:
-                self._enqueue(now, None, MAX_PACKET)
-            for packet in packets:
-                self._enqueue(now, packet, len(packet))
-
-    def _enqueue(self, now: float, packet: Optional[bytes], length: int) -> None:
-        self._counts['packets'] += 1
-        # The packet is complete once its bytes would have crossed the line at 9600 baud.
-        self._in_line_free = max(self._in_line_free, now)
-        if self.pace_output:
-            self._in_line_free += length * self.byte_s
-        if self._silent:
-            self._counts['ignored'] += 1
-        elif len(self._inbox) >= INBOX_LIMIT:
-            self._counts['overflows'] += 1
-        else:
-            self._inbox.append((self._in_line_free, packet))
-
-    # Output -------------------------------------------------------------------------------
-
     def _reply(self, packet: bytes, now: float) -> None:
-        if self._silent or self._master is None:
+        if self._silent or self._line.master is None:
             return
         if packet[0] != BROADCAST and packet[1] >> 4 == 0x6:
             self._errors[packet[2]] += 1
-        if self._wrong_socket_once and packet[0] != BROADCAST and packet[1] >> 4 in (4, 5, 6) \
-                and packet[1] & 0x0F in SOCKETS:
-            self._wrong_socket_once = False
-            packet = bytes((packet[0], packet[1] ^ 0x03)) + packet[2:]
-        packet = self._fault(packet)
-        if packet is None:
-            self._counts['dropped'] += 1
-            return
-        drop, garble = self.faults.drop_probability, self.faults.garble_probability
-        if drop > 0.0 and self._rng.random() < drop:
-            self._counts['dropped'] += 1
-            return
-        if garble > 0.0 and self._rng.random() < garble:
-            self._counts['garbled'] += 1
-            packet = self._garble(packet)
-        self._counts['sent'] += 1
-        self._outbox.append((now + max(0.0, self.faults.delay_s), packet))
-
-    def _send_now(self, packet: bytes, now: float) -> None:
-        # Explicit sends bypass the reply faults; without a pty they go nowhere.
-        if self._master is not None:
-            self._outbox.append((now, packet))
-
-    def _fault(self, packet: bytes) -> Optional[bytes]:
-        """Apply the reply faults that depend on what the reply is (None: not sent)."""
-        faults, rng = self.faults, self._rng
-        if packet[0] == BROADCAST or len(packet) < 3:
-            return packet
-        kind, socket = packet[1] >> 4, packet[1] & 0x0F
-        if kind == 0x5 and socket in SOCKETS and len(packet) == 3 and faults.lose_completions:
-            return None
-        if kind == 0x4 and len(packet) == 3 and faults.bad_ack_socket_probability > 0.0 \
-                and rng.random() < faults.bad_ack_socket_probability:
-            return bytes((packet[0], 0x40 | rng.choice(_ABSENT_SOCKETS), TERMINATOR))
-        if packet[1] == 0x50 and len(packet) == 11 and faults.bad_position_probability > 0.0 \
-                and rng.random() < faults.bad_position_probability:
-            return packet[:2] + rng.choice(_BAD_POSITIONS) + bytes((TERMINATOR,))
-        return packet
-
-    def _garble(self, packet: bytes) -> bytes:
-        data = bytearray(packet)
-        if self._rng.random() < 0.5:
-            data[self._rng.randrange(len(data))] ^= 1 << self._rng.randrange(8)
-        else:
-            at = self._rng.randrange(len(data) + 1)
-            data[at:at] = bytes(self._rng.randrange(256) for _ in range(self._rng.randint(1, 3)))
-        return bytes(data)
-
-    def _next_output_time(self) -> Optional[float]:
-        if self._master is None:
-            return None
-        if self._wire:
-            if not self.pace_output:
-                return self._wire_ready
-            return max(self._line_free, self._wire_ready) + self.byte_s
-        if self._outbox:
-            return self._outbox[0][0] + (self.byte_s if self.pace_output else 0.0)
-        return None
-
-    def _pump_output(self, now: float) -> None:
-        """Write the bytes whose time has come: one byte per 1.04 ms when paced."""
-        if self._master is None:
-            return
-        chunk = bytearray()
-        while True:
-            if not self._wire:
-                if not self._outbox or self._outbox[0][0] > now:
-                    break
-                self._wire_ready, packet = self._outbox.popleft()
-                self._wire.extend(packet)
-            if not self.pace_output:
-                chunk.extend(self._wire)
-                self._wire.clear()
-                continue
-            done = max(self._line_free, self._wire_ready) + self.byte_s
-            if done > now:
-                break
-            chunk.append(self._wire.popleft())
-            self._line_free = done
-        if chunk:
-            try:
-                os.write(self._master, bytes(chunk))
-            except OSError as exc:
-                # A full pty buffer loses bytes, like an overrun UART.
-                if exc.errno not in (errno.EAGAIN, errno.EIO):
-                    raise
+        sent = self._injector.reply(packet)
+        if sent is not None:
+            self._counts['sent'] += 1
+            self._line.send(sent[0], now + sent[1])
 
 
 def run_fake_camera(link_path: Optional[str], init_s: float) -> int:

@@ -8,7 +8,8 @@ Drive or zoom command only when the controller's decision changed (or to
 refresh it now and then), so the camera's two sockets and 9600-baud line
 are never the bottleneck. Commands never wait for a camera socket: when
 both are busy (completions lost) the command is skipped and sent next
-cycle, so a busy camera cannot slow the positions down. Requests from other
+cycle, and a command whose ACK did not come pauses the commands for
+``refresh_s``, so a busy or deaf camera cannot slow the positions down. Requests from other
 threads (home, reset) start between cycles and run while the cycles go on.
 :meth:`HeadLoop.health` says whether fresh positions flow
 (:class:`~pattern_locator.tracking.health.HeadHealth`); :meth:`HeadLoop.stop`
@@ -120,6 +121,7 @@ class HeadLoop:
             stale_after_s = max(0.3, 3.0 / expected_rate_hz) if expected_rate_hz else 1.0
         self._health = HealthMonitor(stale_after_s, expected_rate_hz)
         self._sent_at = 0.0
+        self._pause_commands_until = 0.0
         self._sent_key: Optional[Tuple[int, int, int]] = None
         self._requests: 'queue.Queue[HeadRequest]' = queue.Queue()
         self._running: Optional[Tuple[HeadRequest, CommandResult]] = None
@@ -161,6 +163,9 @@ class HeadLoop:
                 self._error('command', exc)
                 self._health.command_failure(failure_kind(exc), str(exc))
                 self._sent_key = None            # resend next cycle
+                if isinstance(exc, ViscaTimeout) and not isinstance(exc, ViscaSocketsBusy):
+                    # No ACK cost a whole reply timeout: spare the positions for a while.
+                    self._pause_commands_until = time.monotonic() + self.refresh_s
         return reading
 
     def on_target(self, stamp_s: float, pan_error: float, tilt_error: float,
@@ -226,6 +231,8 @@ class HeadLoop:
     def _command(self, command: HeadCommand) -> None:
         key = (command.pan_steps, command.tilt_steps, command.zoom)
         now = time.monotonic()
+        if now < self._pause_commands_until:
+            return
         if key == self._sent_key and now - self._sent_at < self.refresh_s:
             return
         previous = self._sent_key

@@ -419,7 +419,8 @@ class EviD31:
         if self._startup.clearing:
             raise ViscaConnectionError(f'EVI-D31 on {self.port}: start-up in progress '
                                        '(Address Set, IF_Clear)')
-        for attempt in range(retries + 1 if blocking else 1):
+        attempts = retries + 1 if blocking else 1
+        for attempt in range(attempts):
             try:
                 return self._transport.command(packet, wait=wait, timeout=timeout,
                                                duration_s=duration_s,
@@ -427,8 +428,9 @@ class EviD31:
             except ViscaSocketsBusy:
                 raise
             except ViscaTimeout:
-                if attempt == retries or wait:
+                if attempt == attempts - 1 or wait:
                     raise
+        raise AssertionError('unreachable')  # pragma: no cover
 
     def _start_move(self, packet: bytes, timeout: float, wait: bool) -> CommandResult:
         with self.command_lock:

@@ -107,8 +107,9 @@ Faults (for tests, thread-safe)
     ``faults.bad_position_probability`` (impossible position answers),
     ``lose_completions``, ``bad_ack_socket_probability`` (ACKs on sockets
     0, 3..9), ``error_only`` (every addressed packet answered with one
-    error code, nothing done) and ``phantom_ack_interval_s`` (ACKs never
-    completed) are the broken camera of issue 10 (see :class:`Faults`);
+    error code, nothing done), ``phantom_ack_interval_s`` (ACKs never
+    completed) and ``deaf_to_commands`` are the broken camera of issue 10
+    (see :class:`Faults`);
     :meth:`reply_to_wrong_socket_once` swaps sockets 1 and 2 in the next
     ACK, completion or socket error; :meth:`send_garbage` and
     :meth:`send_network_change` write at once; :meth:`vanish` closes the pty
@@ -414,8 +415,8 @@ class EmulatedEviD31:
                 self._line.send(ack(address, socket), now)
         if self._line.packet_due(now):
             packet = self._line.next_packet()
-            refusal = self._injector.error_only(packet, self._device.address)
-            replies = [refusal] if refusal is not None else self._responder.handle(packet, now)
+            refusal = self._injector.refusal(packet, self._device.address)
+            replies = refusal if refusal is not None else self._responder.handle(packet, now)
             for reply in replies:
                 self._reply(reply, now)
 

@@ -42,7 +42,9 @@ class Faults:
       addressed to the camera is answered with that error only and does
       nothing (broadcasts still come back);
     * ``phantom_ack_interval_s``: every so often, ACKs on sockets 1 and 2
-      that no command caused and no completion follows.
+      that no command caused and no completion follows;
+    * ``deaf_to_commands``: commands get no reply and do nothing
+      (inquiries and broadcasts are still answered).
 
     Assigning an attribute is atomic, so tests may change them while the
     emulator runs.
@@ -61,6 +63,7 @@ class Faults:
         self.bad_ack_socket_probability = 0.0
         self.error_only: Optional[int] = None
         self.phantom_ack_interval_s = 0.0
+        self.deaf_to_commands = False
 
 
 class FaultInjector:
@@ -76,13 +79,19 @@ class FaultInjector:
         self.wrong_socket_once = False
         self._rng = random.Random(seed)
 
-    def error_only(self, packet: Optional[bytes], address: Optional[int]) -> Optional[bytes]:
-        """Return the error that replaces the camera's answer to ``packet``, or None."""
-        code = self.faults.error_only
-        if code is None or packet is None or address is None or packet[0] != 0x80 | address:
+    def refusal(self, packet: Optional[bytes],
+                address: Optional[int]) -> Optional[Tuple[bytes, ...]]:
+        """Return the replies that replace the camera's answer to ``packet``, or None."""
+        if packet is None or address is None or len(packet) < 3 or packet[0] != 0x80 | address:
             return None
-        self.counts['error_only'] += 1
-        return error(address, 1 if code == ERROR_NOT_EXECUTABLE else 0, code)
+        code = self.faults.error_only
+        if code is not None:
+            self.counts['error_only'] += 1
+            return (error(address, 1 if code == ERROR_NOT_EXECUTABLE else 0, code),)
+        if self.faults.deaf_to_commands and packet[1] != 0x09:
+            self.counts['ignored'] += 1
+            return ()
+        return None
 
     def reply(self, packet: bytes) -> Optional[Tuple[bytes, float]]:
         """Return (the reply as it goes out, its delay), or None when it is lost."""

@@ -65,6 +65,17 @@ def test_positions_come_every_cycle_while_both_sockets_are_busy(emulator, camera
     assert loop.commands_sent >= sent
 
 
+def test_a_camera_deaf_to_commands_costs_one_reply_timeout_not_the_rate(emulator, camera):
+    loop = tracking_loop(camera)
+    cycle_tracking(loop, 2)
+    emulator.faults.deaf_to_commands = True
+    readings = cycle_tracking(loop, 8)
+    assert all(r is not None for r in readings)
+    # One Drive waited for its ACK; the commands then pause for refresh_s (1 s).
+    assert loop.errors['ViscaTimeout'] == 1, (loop.errors, loop.commands_sent, loop.last_error)
+    assert 'no reply' in loop.health().message
+
+
 def test_error_only_replies_are_an_error_and_positions_return_at_once(emulator, camera):
     loop = HeadLoop(camera, None, stale_after_s=0.3)
     assert loop.cycle() is not None and loop.health().ok

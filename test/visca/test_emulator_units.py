@@ -68,8 +68,12 @@ def test_fault_injector_makes_the_broken_camera_of_issue_10():
     with pytest.raises(v.ViscaReplyError):
         v.parse_pan_tilt_position(sent[2:-1])
     faults.error_only = v.ERROR_SYNTAX
-    assert injector.error_only(v.inquiry_power(1), 1) == h('90 60 02 FF')
-    assert injector.error_only(v.address_set(), 1) is None         # broadcasts pass
+    assert injector.refusal(v.inquiry_power(1), 1) == (h('90 60 02 FF'),)
+    assert injector.refusal(v.address_set(), 1) is None         # broadcasts pass
     faults.clear()
-    assert injector.error_only(v.inquiry_power(1), 1) is None
+    assert injector.refusal(v.inquiry_power(1), 1) is None
+    faults.deaf_to_commands = True
+    assert injector.refusal(v.pan_tilt_home(1), 1) == ()
+    assert injector.refusal(v.inquiry_power(1), 1) is None
+    faults.clear()
     assert injector.counts['dropped'] == 1 and injector.counts['error_only'] == 1

@@ -13,7 +13,7 @@ from pattern_locator.visca.sockets import SocketTable
 from pattern_locator.visca.stats import Counters
 
 ADDR = 1
-PROPERTY = settings(max_examples=100, deadline=None, database=None)
+PROPERTY = settings(max_examples=60, deadline=None, database=None)
 
 # Replies a camera at address 1 can send (sockets 0..15 on purpose), and packets
 # that look like them.

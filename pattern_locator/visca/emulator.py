@@ -431,17 +431,20 @@ class EmulatedEviD31:
             self._line.send(sent[0], now + sent[1])
 
 
-def run_fake_camera(link_path: Optional[str], init_s: float) -> int:
+def run_fake_camera(link_path: Optional[str], init_s: float, faults: str = '') -> int:
     """
     Run an emulated EVI-D31 until Ctrl-C or SIGTERM and return 0.
 
     Prints one line ``fake EVI-D31 on <port>`` once the port can be opened.
+    ``faults``: knobs of :class:`Faults` as ``name=value,...`` (a broken
+    camera for trying the driver by hand); ConfigError for a bad one.
     """
+    camera = EmulatedEviD31(init_s=init_s, link_path=link_path)
+    camera.faults.apply(faults)
     stopped = threading.Event()
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, lambda signum, frame: stopped.set())
-    camera = EmulatedEviD31(init_s=init_s, link_path=link_path)
     try:
         camera.start()
         print(f'fake EVI-D31 on {camera.port}', flush=True)

@@ -12,6 +12,7 @@ from typing import Optional, Tuple
 
 from .protocol import (BROADCAST, COMMAND_SOCKETS, encode_nibbles, error, ERROR_NOT_EXECUTABLE,
                        TERMINATOR)
+from ..errors import ConfigError
 
 # Position answers a broken camera was seen to send (issue 10): pan -8000h (-65 rad),
 # pan 1000 units (113.6 deg), tilt 396 units (33 deg), and a nibble byte above 0F.
@@ -52,6 +53,33 @@ class Faults:
 
     def __init__(self) -> None:
         self.clear()
+
+    def apply(self, spec: str) -> 'Faults':
+        """
+        Set knobs from ``name=value,...`` (e.g. ``bad_position_probability=0.3,error_only=2``).
+
+        Error codes are hex; ``lose_completions`` and ``deaf_to_commands`` take
+        0/1. ConfigError, in one line, for an unknown name or a bad value.
+        """
+        for item in filter(None, (part.strip() for part in spec.split(','))):
+            name, _, text = item.partition('=')
+            name = name.strip().replace('-', '_')
+            if name.startswith('_') or not hasattr(self, name) or name in ('apply', 'clear'):
+                known = ', '.join(sorted(k for k in vars(self) if not k.startswith('_')))
+                raise ConfigError(f'unknown fault {name!r} (known: {known})')
+            try:
+                if name == 'error_only':
+                    value = int(text, 16)
+                elif name in ('lose_completions', 'deaf_to_commands'):
+                    value = bool(int(text))
+                else:
+                    value = float(text)
+                    if not 0.0 <= value <= (1.0 if name.endswith('probability') else 60.0):
+                        raise ValueError(value)
+            except ValueError:
+                raise ConfigError(f'fault {name}: bad value {text!r}') from None
+            setattr(self, name, value)
+        return self
 
     def clear(self) -> None:
         """Switch every fault off."""

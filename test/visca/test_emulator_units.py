@@ -1,5 +1,6 @@
 """The emulator's units without a pty: motion model, device state, protocol handling, faults."""
 
+from pattern_locator.errors import ConfigError
 from pattern_locator.visca import protocol as v
 from pattern_locator.visca.emulator_device import EmulatedDevice
 from pattern_locator.visca.emulator_faults import BAD_POSITIONS, FaultInjector, Faults
@@ -77,3 +78,14 @@ def test_fault_injector_makes_the_broken_camera_of_issue_10():
     assert injector.refusal(v.inquiry_power(1), 1) is None
     faults.clear()
     assert injector.counts['dropped'] == 1 and injector.counts['error_only'] == 1
+
+
+def test_faults_from_a_command_line_spec():
+    faults = Faults().apply('bad_position_probability=0.5, error-only=41,lose_completions=1')
+    assert faults.bad_position_probability == 0.5 and faults.error_only == 0x41
+    assert faults.lose_completions is True
+    for spec, words in (('nonsense=1', "unknown fault 'nonsense'"),
+                        ('drop_probability=2', "bad value '2'"),
+                        ('error_only=zz', "bad value 'zz'"), ('clear=1', 'unknown fault')):
+        with pytest.raises(ConfigError, match=words):
+            Faults().apply(spec)

@@ -6,26 +6,31 @@ signs: **positive pan = turn left** (counter-clockwise seen from above,
 about +z up), positive tilt = look up. VISCA counts pan positive to the
 *right*, so this layer negates pan both ways; tilt has the same sign in both.
 
-:class:`EviD31` adds the camera's start-up (Address Set, IF_Clear, power and
-initialisation), speed quantisation, and motion bookkeeping (a Drive cancels
-a running absolute/relative move first, since the camera refuses it otherwise)
-to :class:`~pattern_locator.visca.transport.ViscaTransport`. It is
-thread-safe: a ROS node may poll :meth:`EviD31.position` / :meth:`EviD31.zoom`
-from one timer and call :meth:`EviD31.drive` from another.
+:class:`EviD31` adds the camera's start-up (:mod:`~pattern_locator.visca.startup`:
+Address Set, IF_Clear, power and initialisation), speed quantisation, motion
+bookkeeping (a Drive cancels a running absolute/relative move first, since
+the camera refuses it otherwise) and checked answers (a position or zoom
+outside the camera's range is rejected, counted, never returned) to
+:class:`~pattern_locator.visca.transport.ViscaTransport`. It is thread-safe:
+a ROS node may poll :meth:`EviD31.position` / :meth:`EviD31.zoom` from one
+timer and call :meth:`EviD31.drive` from another, and :meth:`EviD31.close`
+from any thread ends every wait at once.
 """
 
+import collections
 from dataclasses import dataclass
 import logging
 import math
 import threading
 import time
-from typing import Callable, Optional, Tuple, TypeVar
+from typing import Callable, Dict, Optional, Tuple, TypeVar
 
 import serial
 
 from . import protocol as visca
-from .transport import (CommandResult, ViscaCommandError, ViscaConnectionError, ViscaTimeout,
-                        ViscaTransport)
+from .startup import StartUp
+from .transport import (CommandResult, ViscaCommandError, ViscaConnectionError,
+                        ViscaSocketsBusy, ViscaTimeout, ViscaTransport)
 
 logger = logging.getLogger(__name__)
 _T = TypeVar('_T')
@@ -34,8 +39,12 @@ PAN_LIMIT_DEG = visca.PAN_LIMIT_UNITS / visca.PAN_UNITS_PER_DEG
 TILT_LIMIT_DEG = visca.TILT_LIMIT_UNITS / visca.TILT_UNITS_PER_DEG
 # Worst-case motion times bound the waits for completions (plus a margin).
 _MOTION_MARGIN_S = 3.0
+# Reset and power-on run the initialisation: "several seconds" (visca.md).
 _RESET_TIMEOUT_S = 20.0
+# Zoom Direct end to end takes about 2.2 s.
 _ZOOM_TIMEOUT_S = 10.0
+# Closing sends Cancel/Stop; each waits this long for its reply at most.
+_CLOSE_REPLY_S = 0.15
 
 
 @dataclass(frozen=True)
@@ -110,31 +119,28 @@ class EviD31:
     """
 
     def __init__(self, port: str, baud: int = 9600, address: int = 1,
-                 reply_timeout_s: float = 1.0, completion_timeout_s: float = 30.0,
+                 reply_timeout_s: float = 0.3, completion_timeout_s: float = 30.0,
                  serial_factory: Callable[..., serial.Serial] = serial.Serial,
                  power_on_at_start: bool = True, restart_timeout_s: float = 15.0,
                  **transport_options) -> None:
         self.port = port
         self.address = address
-        self.power_on_at_start = power_on_at_start
         self.restart_timeout_s = restart_timeout_s
+        self._startup = StartUp(self, power_on_at_start)
         self._transport = ViscaTransport(
             port, baud=baud, address=address, reply_timeout_s=reply_timeout_s,
             completion_timeout_s=completion_timeout_s, serial_factory=serial_factory,
-            on_reconnect=self._on_reconnect, on_network_change=self._on_network_change,
-            **transport_options)
+            on_reconnect=self._startup.on_reconnect,
+            on_network_change=self._startup.on_network_change, **transport_options)
         # Every command goes out under this lock, so the socket of a running
         # move cannot be reused by another of our commands between a check and
         # its Cancel.
-        self._command_lock = threading.RLock()
-        self._startup_lock = threading.Lock()
+        self.command_lock = threading.RLock()
         self._move: Optional[CommandResult] = None
         self._zoom_move: Optional[CommandResult] = None
-        self._ready = threading.Event()
-        self._ready_generation = -1
-        self._power_asked = False
-        self._clearing = False
-        self._closes = 0
+        self._closing = threading.Event()
+        self._rejected: 'collections.Counter[str]' = collections.Counter()
+        self._last_rejected = ''
 
     # Life cycle ---------------------------------------------------------------------------
 
@@ -151,8 +157,27 @@ class EviD31:
     @property
     def ready(self) -> bool:
         """Return True when connected and the start-up has finished on this connection."""
-        return (self._ready.is_set() and self._transport.connected
-                and self._ready_generation == self._transport.reconnect_count)
+        return self._startup.ready and not self._closing.is_set()
+
+    @property
+    def closing(self) -> bool:
+        """Return True once :meth:`close` was called (until the next :meth:`start`)."""
+        return self._closing.is_set()
+
+    @property
+    def power_on_at_start(self) -> bool:
+        """Return whether the start-up switches a camera in standby on."""
+        return self._startup.power_on_at_start
+
+    @property
+    def rejected_replies(self) -> Dict[str, int]:
+        """Return the answers rejected as impossible (out of range, malformed), by inquiry."""
+        return dict(self._rejected)
+
+    @property
+    def last_rejected(self) -> str:
+        """Return why the last answer was rejected ('' if none was)."""
+        return self._last_rejected
 
     @property
     def pan_limits_rad(self) -> Tuple[float, float]:
@@ -168,39 +193,47 @@ class EviD31:
         """
         Open the port and bring the camera up; raise a ViscaError after ``timeout_s``.
 
-        Retries opening the port, sends Address Set and IF_Clear, turns the
-        power on if it is in standby (``power_on_at_start``), and waits until
-        the head finished its initialisation (a Stop is accepted and the
-        position inquiry answers).
+        A port that cannot be opened (missing, busy, no permission) raises
+        ViscaConnectionError at once, in one line that says why: the caller
+        retries. Then sends Address Set and IF_Clear, turns the power on if
+        it is in standby (``power_on_at_start``), and waits until the head
+        finished its initialisation (a Stop is accepted and the position
+        inquiry answers). :meth:`close` from another thread ends it at once.
         """
         deadline = time.monotonic() + timeout_s
-        delay = 0.1
-        closes = self._closes
-        while not self._transport.is_open:
-            if self._closes != closes:
-                raise ViscaConnectionError(f'EVI-D31 on {self.port}: closed during start()')
-            try:
-                self._transport.open()
-            except ViscaConnectionError as exc:
-                if time.monotonic() + delay > deadline:
-                    raise ViscaConnectionError(
-                        f'{exc} (gave up after {timeout_s:.1f} s)') from exc
-                time.sleep(delay)
-                delay = min(2 * delay, 1.0)
-        self._start_up(deadline, timeout_s, wait_reconnect=True)
+        self._closing.clear()
+        if not self._transport.is_open:
+            self._transport.open()
+        self._startup.run(deadline, timeout_s, wait_reconnect=True)
 
     def close(self, stop: bool = True) -> None:
-        """Stop the head (best effort, when ``stop``) and close the port."""
-        self._closes += 1
-        self._ready.clear()
+        """
+        Stop the head (best effort, when ``stop``) and close the port; from any thread.
+
+        Every other call waiting on the camera fails at once with
+        ViscaConnectionError; the Cancel of a running move and the Stop then
+        wait at most 0.15 s each for their replies, so this returns within
+        about 0.3 s plus joining the reader thread. Idempotent.
+        """
+        self._closing.set()
+        self._startup.forget()
+        final = []
         if stop and self._transport.connected:
-            try:
-                with self._command_lock:
-                    self._cancel_move()
-                    self._send(visca.pan_tilt_stop(self.address), self._short_timeout())
-            except visca.ViscaError as exc:
-                logger.info('EVI-D31 on %s: no stop before closing: %s', self.port, exc)
-        self._transport.close()
+            move = self._move
+            if move is not None and not move.done:
+                final.append(visca.cancel(self.address, move.socket))
+            final.append(visca.pan_tilt_stop(self.address))
+        self._transport.close(final=final, final_timeout_s=min(
+            _CLOSE_REPLY_S, self._transport.reply_timeout_s))
+
+    def wait_closing(self, seconds: float) -> bool:
+        """Sleep ``seconds`` or until :meth:`close`; return True when closing."""
+        return self._closing.wait(seconds)
+
+    def forget_motions(self) -> None:
+        """Forget the running moves (IF_Clear emptied the sockets)."""
+        with self.command_lock:
+            self._move = self._zoom_move = None
 
     def __enter__(self) -> 'EviD31':
         return self
@@ -210,7 +243,8 @@ class EviD31:
 
     # Motion -------------------------------------------------------------------------------
 
-    def drive(self, pan_rad_s: float, tilt_rad_s: float) -> Tuple[float, float]:
+    def drive(self, pan_rad_s: float, tilt_rad_s: float,
+              blocking: bool = True) -> Tuple[float, float]:
         """
         Turn at the given speeds (REP 103: pan positive = left, tilt positive = up).
 
@@ -218,25 +252,29 @@ class EviD31:
         80/24 deg/s, tilt 1..14h of 2.5 deg/s, clamped to the maximum); a
         speed below half a step stops that axis. A running absolute/relative
         move, home or reset is cancelled first. Returns the speeds actually
-        commanded, in rad/s with the same signs.
+        commanded, in rad/s with the same signs. ``blocking`` False (a
+        control loop that sends again next cycle): raise ViscaSocketsBusy at
+        once instead of waiting for a free socket, and do not resend after a
+        lost ACK.
         """
         p_step, p_dir = pan_step(pan_rad_s)
         t_step, t_dir = tilt_step(tilt_rad_s)
         # Speed bytes stay 01.. even for a stopped axis (some models refuse 00).
         packet = visca.pan_tilt_drive(self.address, max(1, p_step), max(1, t_step),
                                       p_dir, t_dir)
-        with self._command_lock:
+        with self.command_lock:
             self._cancel_move()
-            self._send(packet, self._short_timeout())
+            self._send(packet, self._short_timeout(), blocking=blocking)
         pan = math.radians(visca.pan_speed_deg_s(p_step)) if p_step else 0.0
         tilt = math.radians(visca.tilt_speed_deg_s(t_step)) if t_step else 0.0
         return (math.copysign(pan, pan_rad_s), math.copysign(tilt, tilt_rad_s))
 
-    def stop(self) -> None:
-        """Stop pan and tilt (cancels a running move first)."""
-        with self._command_lock:
+    def stop(self, blocking: bool = True) -> None:
+        """Stop pan and tilt (cancels a running move first); ``blocking`` as for drive()."""
+        with self.command_lock:
             self._cancel_move()
-            self._send(visca.pan_tilt_stop(self.address), self._short_timeout())
+            self._send(visca.pan_tilt_stop(self.address), self._short_timeout(),
+                       blocking=blocking)
 
     def move_to(self, pan_rad: float, tilt_rad: float, speed_fraction: float = 1.0,
                 wait: bool = True, timeout: Optional[float] = None) -> CommandResult:
@@ -281,56 +319,63 @@ class EviD31:
     def zoom_to(self, units: int, wait: bool = False) -> CommandResult:
         """Zoom to ``units`` (0 wide .. 3FFh tele); cancels a running zoom_to first."""
         packet = visca.zoom_direct(self.address, int(units))
-        with self._command_lock:
+        with self.command_lock:
             self._cancel_zoom()
-            result = self._send(packet, _ZOOM_TIMEOUT_S)
+            result = self._send(packet, _ZOOM_TIMEOUT_S, duration_s=_ZOOM_TIMEOUT_S)
             self._zoom_move = result
         if wait:
             result.wait(_ZOOM_TIMEOUT_S)
         return result
 
-    def zoom_tele(self, speed: Optional[int] = None) -> None:
+    def zoom_tele(self, speed: Optional[int] = None, blocking: bool = True) -> None:
         """Zoom in until zoom_stop (standard speed, or variable 2..7)."""
-        self._zoom_command(visca.zoom_tele(self.address, speed))
+        self._zoom_command(visca.zoom_tele(self.address, speed), blocking)
 
-    def zoom_wide(self, speed: Optional[int] = None) -> None:
+    def zoom_wide(self, speed: Optional[int] = None, blocking: bool = True) -> None:
         """Zoom out until zoom_stop (standard speed, or variable 2..7)."""
-        self._zoom_command(visca.zoom_wide(self.address, speed))
+        self._zoom_command(visca.zoom_wide(self.address, speed), blocking)
 
-    def zoom_stop(self) -> None:
+    def zoom_stop(self, blocking: bool = True) -> None:
         """Stop zooming (also a running zoom_to)."""
-        self._zoom_command(visca.zoom_stop(self.address))
+        self._zoom_command(visca.zoom_stop(self.address), blocking)
 
     def focus_auto(self) -> None:
         """Switch to auto focus."""
-        with self._command_lock:
+        with self.command_lock:
             self._send(visca.focus_auto(self.address), self._short_timeout(), wait=True)
 
     def power(self, on: bool, wait: bool = True) -> CommandResult:
         """Switch the camera on or to standby."""
-        with self._command_lock:
-            return self._send(visca.power(self.address, on), _RESET_TIMEOUT_S, wait=wait)
+        with self.command_lock:
+            return self._send(visca.power(self.address, on), _RESET_TIMEOUT_S, wait=wait,
+                              duration_s=_RESET_TIMEOUT_S)
 
     # Inquiries ----------------------------------------------------------------------------
 
     def position(self) -> Tuple[float, float]:
-        """Return (pan, tilt) in radians, REP 103: pan positive = left, tilt positive = up."""
-        pan, tilt = self._inquiry(visca.inquiry_pan_tilt_position(self.address), 8,
+        """
+        Return (pan, tilt) in radians, REP 103: pan positive = left, tilt positive = up.
+
+        Never outside the travel plus ``protocol.TRAVEL_MARGIN_DEG``: such an
+        answer is rejected (counted in :attr:`rejected_replies`) and asked
+        once more; ViscaReplyError if that one is bad too.
+        """
+        pan, tilt = self._inquiry('position', visca.inquiry_pan_tilt_position(self.address), 8,
                                   visca.parse_pan_tilt_position)
         return from_visca_units(pan, tilt)
 
     def zoom(self) -> int:
-        """Return the zoom position in camera units (0 wide .. 3FFh tele)."""
-        return self._inquiry(visca.inquiry_zoom_position(self.address), 4,
+        """Return the zoom position in camera units (0 wide .. 3FFh tele), checked likewise."""
+        return self._inquiry('zoom', visca.inquiry_zoom_position(self.address), 4,
                              visca.parse_zoom_position)
 
     def power_on(self) -> bool:
         """Return True when the camera is on, False in standby."""
-        return self._inquiry(visca.inquiry_power(self.address), 1, visca.parse_power)
+        return self._inquiry('power', visca.inquiry_power(self.address), 1, visca.parse_power)
 
     def version(self) -> ViscaVersion:
         """Return the camera's vendor, model, ROM version and socket count."""
-        return ViscaVersion(*self._inquiry(visca.inquiry_version(self.address), 7,
+        return ViscaVersion(*self._inquiry('version', visca.inquiry_version(self.address), 7,
                                            visca.parse_version))
 
     # Internals ----------------------------------------------------------------------------
@@ -349,7 +394,7 @@ class EviD31:
         return max(2 * PAN_LIMIT_DEG / visca.pan_speed_deg_s(ps),
                    2 * TILT_LIMIT_DEG / visca.tilt_speed_deg_s(ts)) + _MOTION_MARGIN_S
 
-    def _inquiry(self, packet: bytes, length: int, parse: Callable[[bytes], _T],
+    def _inquiry(self, name: str, packet: bytes, length: int, parse: Callable[[bytes], _T],
                  retries: int = 1) -> _T:
         """Ask, parse the answer; once more if it got lost or garbled (VISCA has no checksum)."""
         for attempt in range(retries + 1):
@@ -357,37 +402,50 @@ class EviD31:
                 return parse(self._transport.inquiry(packet, answer_length=length).payload)
             except ViscaCommandError:
                 raise
+            except visca.ViscaReplyError as exc:
+                self._rejected[name] += 1
+                self._last_rejected = f'{name}: {exc}'
+                logger.debug('EVI-D31 on %s: rejected %s', self.port, self._last_rejected)
+                if attempt == retries or not self._transport.connected:
+                    raise
             except (ViscaTimeout, visca.ViscaError):
                 if attempt == retries or not self._transport.connected:
                     raise
 
-    def _send(self, packet: bytes, timeout: float, wait: bool = False,
-              retries: int = 1) -> CommandResult:
-        """Send a command; retry an idempotent one whose ACK did not come."""
-        if self._clearing:
+    def _send(self, packet: bytes, timeout: float, wait: bool = False, retries: int = 1,
+              duration_s: float = visca.INSTANT_COMMAND_S,
+              blocking: bool = True) -> CommandResult:
+        """Send a command; retry an idempotent one whose ACK did not come (when blocking)."""
+        if self._startup.clearing:
             raise ViscaConnectionError(f'EVI-D31 on {self.port}: start-up in progress '
                                        '(Address Set, IF_Clear)')
-        for attempt in range(retries + 1):
+        attempts = retries + 1 if blocking else 1
+        for attempt in range(attempts):
             try:
-                return self._transport.command(packet, wait=wait, timeout=timeout)
+                return self._transport.command(packet, wait=wait, timeout=timeout,
+                                               duration_s=duration_s,
+                                               socket_wait_s=None if blocking else 0.0)
+            except ViscaSocketsBusy:
+                raise
             except ViscaTimeout:
-                if attempt == retries or wait:
+                if attempt == attempts - 1 or wait:
                     raise
+        raise AssertionError('unreachable')  # pragma: no cover
 
     def _start_move(self, packet: bytes, timeout: float, wait: bool) -> CommandResult:
-        with self._command_lock:
+        with self.command_lock:
             self._cancel_move()
             # No resend: a move whose ACK got lost may already be running.
-            result = self._send(packet, timeout, retries=0)
+            result = self._send(packet, timeout, retries=0, duration_s=timeout)
             self._move = result
         if wait:
             result.wait(timeout)
         return result
 
-    def _zoom_command(self, packet: bytes) -> None:
-        with self._command_lock:
+    def _zoom_command(self, packet: bytes, blocking: bool = True) -> None:
+        with self.command_lock:
             self._cancel_zoom()
-            self._send(packet, self._short_timeout())
+            self._send(packet, self._short_timeout(), blocking=blocking)
 
     def _cancel_move(self) -> None:
         self._move = self._cancel(self._move)
@@ -405,98 +463,3 @@ class EviD31:
             logger.warning('EVI-D31 on %s: cancel of socket %d unanswered: %s', self.port,
                            running.socket, exc)
         return None
-
-    def _start_up(self, deadline: float, timeout_s: float, wait_reconnect: bool,
-                  generation: Optional[int] = None) -> None:
-        """
-        Run Address Set, IF_Clear, power on and the wait for the initialisation.
-
-        ``wait_reconnect``: a lost connection is waited out until ``deadline``
-        (``start``) instead of ending the start-up (after a reconnect, where
-        the next reconnect brings its own start-up). ``generation``: skip if
-        a start-up already ran on that connection.
-        """
-        with self._startup_lock:
-            if generation is not None and self._ready.is_set() \
-                    and self._ready_generation >= generation:
-                return
-            self._ready.clear()
-            self._power_asked = False
-            steps = (
-                ('Address Set', lambda: self._transport.broadcast(visca.address_set())),
-                ('IF_Clear', lambda: self._transport.broadcast(visca.if_clear())),
-                ('power on', self._power_step),
-                # While it initialises the head refuses commands (not executable).
-                ('the end of the initialisation', self._init_step),
-            )
-            # Until IF_Clear is through, commands are refused at once (it would cancel them).
-            with self._command_lock:
-                self._clearing = True
-            try:
-                for what, step in steps[:2]:
-                    self._retry(deadline, step, what, timeout_s, wait_reconnect)
-                    if what == 'Address Set':
-                        self._ready_generation = self._transport.reconnect_count
-            finally:
-                with self._command_lock:
-                    self._clearing = False
-                    self._move = self._zoom_move = None
-            for what, step in steps[2:]:
-                self._retry(deadline, step, what, timeout_s, wait_reconnect)
-            self._ready.set()
-            logger.info('EVI-D31 on %s ready', self.port)
-
-    def _retry(self, deadline: float, step: Callable[[], bool], what: str,
-               timeout_s: float, wait_reconnect: bool) -> None:
-        last: object = None
-        while True:
-            try:
-                if step() is not False:
-                    return
-                last = 'not yet'
-            except ViscaConnectionError as exc:
-                if not (wait_reconnect and self._transport.is_open):
-                    raise
-                last = exc
-            except (ViscaTimeout, ViscaCommandError) as exc:
-                last = exc
-            if time.monotonic() >= deadline:
-                error = ViscaConnectionError if isinstance(last, ViscaConnectionError) \
-                    else ViscaTimeout
-                raise error(f'EVI-D31 on {self.port}: no {what} within {timeout_s:.1f} s '
-                            f'(last: {last})')
-            time.sleep(0.05)
-
-    def _power_step(self) -> bool:
-        if self.power_on():
-            return True
-        if self.power_on_at_start and not self._power_asked:
-            logger.info('EVI-D31 on %s in standby: switching it on', self.port)
-            self.power(True, wait=False)
-            self._power_asked = True
-        return False
-
-    def _init_step(self) -> bool:
-        with self._command_lock:
-            self._send(visca.pan_tilt_stop(self.address), self._short_timeout(), wait=True)
-        self.position()
-        return True
-
-    # Transport callbacks (on the transport's callback thread, never the reader) --------------
-
-    def _on_network_change(self) -> None:
-        try:
-            self._transport.broadcast(visca.address_set())
-            logger.info('EVI-D31 on %s: network change, address set again', self.port)
-        except visca.ViscaError as exc:
-            logger.warning('EVI-D31 on %s: address set after network change failed: %s',
-                           self.port, exc)
-
-    def _on_reconnect(self) -> None:
-        try:
-            self._start_up(time.monotonic() + self.restart_timeout_s, self.restart_timeout_s,
-                           wait_reconnect=False, generation=self._transport.reconnect_count)
-        except visca.ViscaError as exc:
-            if self._transport.is_open:
-                logger.warning('EVI-D31 on %s: start-up after reconnect failed: %s',
-                               self.port, exc)

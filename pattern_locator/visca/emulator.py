@@ -8,6 +8,15 @@ model of the head so :meth:`EmulatedEviD31.state` is right at any instant
 (for rendering a simulated camera image). Packets are built and parsed with
 :mod:`pattern_locator.visca.protocol`.
 
+Where to look: :mod:`~pattern_locator.visca.emulator_motion` is the motion
+model (axes in continuous time, limits), :mod:`~pattern_locator.visca.emulator_device`
+the device state (power, address, sockets, initialisation) and what each
+command does, :mod:`~pattern_locator.visca.emulator_protocol` the protocol
+handling (packets in, replies out, in the order below),
+:mod:`~pattern_locator.visca.emulator_line` the pty paced at 9600 baud and
+:mod:`~pattern_locator.visca.emulator_faults` the fault injection; this
+module runs them on one thread, one packet per video field.
+
 Timing
     One received packet (command, inquiry, cancel or broadcast) is processed
     per video field (50 Hz for the PAL D31; ``field_rate_hz``), so an ACK
@@ -95,6 +104,12 @@ Inquiries (socket 0, no ACK; answered in standby and during initialisation)
 Faults (for tests, thread-safe)
     ``faults.drop_probability`` / ``garble_probability`` (flip one bit or
     insert 1-3 random bytes) / ``delay_s`` apply to each reply;
+    ``faults.bad_position_probability`` (impossible position answers),
+    ``lose_completions``, ``bad_ack_socket_probability`` (ACKs on sockets
+    0, 3..9), ``error_only`` (every addressed packet answered with one
+    error code, nothing done), ``phantom_ack_interval_s`` (ACKs never
+    completed) and ``deaf_to_commands`` are the broken camera of issue 10
+    (see :class:`Faults`);
     :meth:`reply_to_wrong_socket_once` swaps sockets 1 and 2 in the next
     ACK, completion or socket error; :meth:`send_garbage` and
     :meth:`send_network_change` write at once; :meth:`vanish` closes the pty
@@ -107,69 +122,23 @@ Faults (for tests, thread-safe)
 
 import collections
 from dataclasses import dataclass
-import errno
-import math
 import os
-import random
 import select
 import signal
 import sys
-import termios
 import threading
 import time
-import tty
-from typing import Callable, Deque, Dict, List, Mapping, Optional, Tuple
+from typing import Callable, Deque, Mapping, Optional, Tuple
 
-from .protocol import (ack, address_set_reply, answer, BROADCAST, completion, decode_nibbles,
-                       error, ERROR_BUFFER_FULL, ERROR_CANCELLED, ERROR_MESSAGE_LENGTH,
-                       ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX, MAX_PACKET,
-                       network_change, PacketFramer, PAN_LIMIT_UNITS, pan_speed_deg_s,
-                       PAN_SPEED_MAX, pan_tilt_position_payload, PAN_UNITS_PER_DEG, POWER_ON,
-                       POWER_STANDBY, TERMINATOR, TILT_LIMIT_UNITS, tilt_speed_deg_s,
-                       TILT_SPEED_MAX, TILT_UNITS_PER_DEG, zoom_position_payload, ZOOM_SPEED_MAX,
-                       ZOOM_SPEED_MIN, ZOOM_TELE, ZOOM_WIDE)
+from .emulator_device import EmulatedDevice, HeadState, SOCKETS
+from .emulator_faults import FaultInjector, Faults
+from .emulator_line import PtyLine
+from .emulator_protocol import ViscaResponder
+from .protocol import ack, BROADCAST, network_change
 
-VENDOR_ID = 0x0001
-MODEL_ID = 0x0402
-ROM_VERSION = 0x0201
-SOCKETS = (1, 2)
-INBOX_LIMIT = 32
 DEFAULT_BAUD = 9600
 
-# Pan-tilt mode answer (EVI-D80 status code list layout, see module docstring).
-_INIT_RUNNING, _INIT_DONE = 0x1000, 0x2000
-_MOTION_RUNNING, _MOTION_DONE = 0x0400, 0x0800
-_END_LEFT, _END_RIGHT, _END_UP, _END_DOWN = 0x01, 0x02, 0x04, 0x08
-
-
-@dataclass(frozen=True)
-class HeadState:
-    """
-    The emulated head at one instant, in the camera's own conventions.
-
-    Pan is positive to the right and tilt positive up (degrees, as the
-    camera counts them; a ROS joint state negates pan). ``zoom_units`` is
-    0 (wide) .. 1023 (tele), not rounded. ``sockets_busy`` lists the sockets
-    holding a command; ``stamp`` is the ``time.monotonic()`` of the state.
-    """
-
-    pan_deg: float
-    tilt_deg: float
-    zoom_units: float
-    powered: bool
-    initialising: bool
-    sockets_busy: Tuple[int, ...]
-    stamp: float
-
-    @property
-    def pan_units(self) -> float:
-        """Return the pan position in camera units (not rounded)."""
-        return self.pan_deg * PAN_UNITS_PER_DEG
-
-    @property
-    def tilt_units(self) -> float:
-        """Return the tilt position in camera units (not rounded)."""
-        return self.tilt_deg * TILT_UNITS_PER_DEG
+__all__ = ['EmulatedEviD31', 'EmulatorStats', 'Faults', 'HeadState', 'run_fake_camera']
 
 
 @dataclass(frozen=True)
@@ -188,171 +157,17 @@ class EmulatorStats:
     errors_by_code: Mapping[int, int]
 
 
-class Faults:
-    """
-    Fault injection knobs, read by the emulator at every reply.
-
-    Assigning an attribute is atomic, so tests may change them while the
-    emulator runs.
-    """
-
-    def __init__(self) -> None:
-        self.drop_probability = 0.0
-        self.garble_probability = 0.0
-        self.delay_s = 0.0
-
-    def clear(self) -> None:
-        """Switch every fault off."""
-        self.drop_probability = 0.0
-        self.garble_probability = 0.0
-        self.delay_s = 0.0
-
-
-class _Axis:
-    """One axis: a position following a list of legs (target, speed) in continuous time."""
-
-    def __init__(self, position: float = 0.0) -> None:
-        self._t0 = 0.0
-        self._p0 = float(position)
-        self._legs: List[Tuple[float, float]] = []
-        # A running Drive: +1/-1 and its speed, so new limits can re-plan it.
-        self.drive = 0
-        self.drive_speed = 0.0
-
-    def at(self, t: float) -> float:
-        p, start = self._p0, self._t0
-        for target, speed in self._legs:
-            duration = abs(target - p) / speed
-            if t < start + duration:
-                return p + math.copysign(speed * max(0.0, t - start), target - p)
-            p, start = target, start + duration
-        return p
-
-    def end_time(self) -> float:
-        p, end = self._p0, self._t0
-        for target, speed in self._legs:
-            end += abs(target - p) / speed
-            p = target
-        return end
-
-    def moving(self, t: float) -> bool:
-        return t < self.end_time()
-
-    def go(self, t: float, legs: List[Tuple[float, float]], drive: int = 0,
-           drive_speed: float = 0.0) -> None:
-        self._p0 = self.at(t)
-        self._t0 = t
-        self._legs = [(float(target), float(speed)) for target, speed in legs if speed > 0.0]
-        self.drive = drive
-        self.drive_speed = drive_speed
-
-    def jump(self, t: float, position: float) -> None:
-        self._p0, self._t0, self._legs = float(position), t, []
-        self.drive, self.drive_speed = 0, 0.0
-
-    def stop(self, t: float) -> None:
-        self.go(t, [])
-
-
-@dataclass
-class _Held:
-    """A command held in a socket."""
-
-    name: str
-    kind: str               # 'instant', 'move' or 'reset'
-    motion: Optional[str]   # 'pt', 'zoom' or None
-    done_tick: int = 0
-
-
-@dataclass(frozen=True)
-class _Command:
-    """A parsed, syntactically valid command."""
-
-    name: str
-    kind: str
-    motion: Optional[str]
-    args: tuple = ()
-
-
-class _SyntaxError(Exception):
-    pass
-
-
-def _nibbles(data: bytes, signed: bool = True) -> int:
-    if len(data) != 4 or any(b > 0x0F for b in data):
-        raise _SyntaxError()
-    return decode_nibbles(data, signed=signed)
-
-
-def _speed(value: int, maximum: int) -> int:
-    # Speed 00 is refused as well (visca.md: some models answer it with a syntax error).
-    if not 1 <= value <= maximum:
-        raise _SyntaxError()
-    return value
-
-
-def _parse_command(body: bytes) -> _Command:
-    """Return the command in ``body`` (the bytes between header and FF) or raise _SyntaxError."""
-    n = len(body)
-    if body[:2] == b'\x01\x06' and n >= 3:
-        op = body[2]
-        if op == 0x01 and n == 7:
-            pan_speed, tilt_speed = _speed(body[3], PAN_SPEED_MAX), _speed(body[4], TILT_SPEED_MAX)
-            if body[5] not in (1, 2, 3) or body[6] not in (1, 2, 3):
-                raise _SyntaxError()
-            return _Command('drive', 'instant', 'pt', (pan_speed, tilt_speed, body[5], body[6]))
-        if op in (0x02, 0x03) and n == 13:
-            pan_speed, tilt_speed = _speed(body[3], PAN_SPEED_MAX), _speed(body[4], TILT_SPEED_MAX)
-            pan, tilt = _nibbles(body[5:9]), _nibbles(body[9:13])
-            if op == 0x02 and (abs(pan) > PAN_LIMIT_UNITS or abs(tilt) > TILT_LIMIT_UNITS):
-                raise _SyntaxError()
-            name = 'absolute' if op == 0x02 else 'relative'
-            return _Command(name, 'move', 'pt', (pan_speed, tilt_speed, pan, tilt))
-        if op == 0x04 and n == 3:
-            return _Command('home', 'move', 'pt')
-        if op == 0x05 and n == 3:
-            return _Command('reset', 'reset', 'pt')
-        if op == 0x07 and n == 13 and body[3] in (0, 1) and body[4] in (0, 1):
-            if body[3] == 0x01:
-                # LimitClear: the position bytes are fixed filler, only checked as nibbles.
-                _nibbles(body[5:9], signed=False)
-                _nibbles(body[9:13], signed=False)
-                return _Command('limit_clear', 'instant', None, (body[4] == 1,))
-            pan, tilt = _nibbles(body[5:9]), _nibbles(body[9:13])
-            if abs(pan) > PAN_LIMIT_UNITS or abs(tilt) > TILT_LIMIT_UNITS:
-                raise _SyntaxError()
-            return _Command('limit_set', 'instant', None, (body[4] == 1, pan, tilt))
-        raise _SyntaxError()
-    if body[:2] == b'\x01\x04' and n >= 3:
-        op = body[2]
-        if op == 0x07 and n == 4:
-            value = body[3]
-            if value in (0x00, 0x02, 0x03):
-                return _Command('zoom', 'instant', 'zoom', ({0: 0, 2: 1, 3: -1}[value], None))
-            if value >> 4 in (0x2, 0x3) and ZOOM_SPEED_MIN <= value & 0x0F <= ZOOM_SPEED_MAX:
-                return _Command('zoom', 'instant', 'zoom',
-                                (1 if value >> 4 == 0x2 else -1, value & 0x0F))
-            raise _SyntaxError()
-        if op == 0x47 and n == 7:
-            position = _nibbles(body[3:7], signed=False)
-            if not ZOOM_WIDE <= position <= ZOOM_TELE:
-                raise _SyntaxError()
-            return _Command('zoom_direct', 'move', 'zoom', (position,))
-        if op == 0x38 and n == 4 and body[3] in (0x02, 0x03):
-            return _Command('focus_mode', 'instant', None, (body[3] == 0x02,))
-        if op == 0x08 and n == 4 and body[3] in (0x00, 0x02, 0x03):
-            return _Command('focus_drive', 'instant', None, (body[3],))
-        if op == 0x00 and n == 4 and body[3] in (POWER_ON, POWER_STANDBY):
-            return _Command('power', 'instant', None, (body[3] == POWER_ON,))
-    raise _SyntaxError()
-
-
 class EmulatedEviD31:
     """
     A Sony EVI-D31 answering VISCA on a pseudo-terminal; see the module docstring.
 
     ``start()`` opens the pty and the emulator thread; open :attr:`port`
-    with pyserial at 9600 baud. Times come from ``time.monotonic()``.
+    with pyserial at 9600 baud. Times come from ``time.monotonic()``. The
+    camera itself is :class:`~pattern_locator.visca.emulator_device.EmulatedDevice`
+    behind a :class:`~pattern_locator.visca.emulator_protocol.ViscaResponder`,
+    the line a :class:`~pattern_locator.visca.emulator_line.PtyLine`, the faults
+    a :class:`~pattern_locator.visca.emulator_faults.FaultInjector`; this class
+    runs them on one thread, one packet per video field.
     """
 
     def __init__(self, field_rate_hz: float = 50.0, init_s: float = 2.0, reset_s: float = 2.5,
@@ -362,52 +177,24 @@ class EmulatedEviD31:
         if field_rate_hz <= 0.0:
             raise ValueError(f'field rate {field_rate_hz} Hz is not positive')
         self.field_rate_hz = float(field_rate_hz)
-        self.init_s = max(0.0, float(init_s))
-        self.reset_s = max(0.0, float(reset_s))
-        self.pace_output = bool(pace_output)
         self.link_path = os.fspath(link_path) if link_path is not None else None
-        self.require_address_set = bool(require_address_set)
-        self.zoom_full_s = float(zoom_full_s)
         # 8N1: ten bit times per byte.
-        self.byte_s = 10.0 / float(baud)
+        self._line = PtyLine(self.link_path, 10.0 / float(baud), bool(pace_output))
         self.faults = Faults()
-        self._rng = random.Random(seed)
+        self._injector = FaultInjector(self.faults, seed)
+        self._device = EmulatedDevice(max(0.0, float(init_s)), max(0.0, float(reset_s)),
+                                      float(zoom_full_s), bool(require_address_set))
+        self._responder = ViscaResponder(self._device)
         self._lock = threading.RLock()
         self._thread: Optional[threading.Thread] = None
         self._stopping = False
         self._requests: Deque[Tuple[Callable[[], None], threading.Event]] = collections.deque()
         self._wake_r: Optional[int] = None
         self._wake_w: Optional[int] = None
-        self._master: Optional[int] = None
-        self._slave: Optional[int] = None
-        self._slave_name: Optional[str] = None
-        # Input side.
-        self._framer = PacketFramer()
-        self._inbox: Deque[Tuple[float, Optional[bytes]]] = collections.deque()
-        self._in_line_free = 0.0
-        # Output side: packets waiting (ready time, bytes), the packet on the wire.
-        self._outbox: Deque[Tuple[float, bytes]] = collections.deque()
-        self._wire: Deque[int] = collections.deque()
-        self._wire_ready = 0.0
-        self._line_free = 0.0
         self._silent = False
-        self._wrong_socket_once = False
-        # Camera state.
-        self._tick = 0
-        self._address: Optional[int] = None if self.require_address_set else 1
-        self._powered = True
-        self._init_end = 0.0
-        self._focus_auto = True
-        self._pt_commanded = False
-        self._pan = _Axis()
-        self._tilt = _Axis()
-        self._zoom = _Axis()
-        self._pan_limits = [-PAN_LIMIT_UNITS, PAN_LIMIT_UNITS]
-        self._tilt_limits = [-TILT_LIMIT_UNITS, TILT_LIMIT_UNITS]
-        self._sockets: Dict[int, Optional[_Held]] = dict.fromkeys(SOCKETS)
-        # Statistics.
-        self._counts = collections.Counter()
-        self._errors = collections.Counter()
+        self._phantom_at = 0.0
+        self._counts: 'collections.Counter[str]' = collections.Counter()
+        self._errors: 'collections.Counter[int]' = collections.Counter()
 
     # Life cycle ---------------------------------------------------------------------------
 
@@ -421,7 +208,7 @@ class EmulatedEviD31:
                 raise FileExistsError(f'{self.link_path} exists and is not a symlink')
             self._wake_r, self._wake_w = os.pipe()
             os.set_blocking(self._wake_w, False)
-            self._open_pty()
+            self._line.open()
             self._power_up(time.monotonic())
             self._thread = threading.Thread(target=self._run, name='fake-evi-d31', daemon=True)
             self._thread.start()
@@ -435,7 +222,7 @@ class EmulatedEviD31:
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=5.0)
         with self._lock:
-            self._close_pty()
+            self._line.close()
             for fd in (self._wake_r, self._wake_w):
                 if fd is not None:
                     os.close(fd)
@@ -454,59 +241,60 @@ class EmulatedEviD31:
     @property
     def port(self) -> str:
         """Return the path to open: the symlink if ``link_path`` was given, else the pty."""
-        if self.link_path:
-            return self.link_path
-        if self._slave_name is None:
-            raise RuntimeError('the emulated camera has no pty (not started, or vanished)')
-        return self._slave_name
+        return self._line.port
 
     @property
     def address(self) -> Optional[int]:
         """Return the camera's VISCA address, None until Address Set."""
         with self._lock:
-            return self._address
+            return self._device.address
+
+    @property
+    def init_s(self) -> float:
+        """Return the power-up initialisation time (s); settable, for the next power-up."""
+        return self._device.init_s
+
+    @init_s.setter
+    def init_s(self, seconds: float) -> None:
+        with self._lock:
+            self._device.init_s = max(0.0, float(seconds))
 
     def state(self) -> HeadState:
         """Return the head's state now (thread-safe)."""
         with self._lock:
-            now = time.monotonic()
-            return HeadState(
-                pan_deg=self._pan.at(now) / PAN_UNITS_PER_DEG,
-                tilt_deg=self._tilt.at(now) / TILT_UNITS_PER_DEG,
-                zoom_units=self._zoom.at(now), powered=self._powered,
-                initialising=self._initialising(now),
-                sockets_busy=tuple(s for s in SOCKETS if self._sockets[s] is not None),
-                stamp=now)
+            return self._device.state(time.monotonic())
 
     @property
     def stats(self) -> EmulatorStats:
         """Return a snapshot of the counters."""
         with self._lock:
-            c = self._counts
+            line, handled, faults = self._line.counts, self._responder.counts, \
+                self._injector.counts
             return EmulatorStats(
-                packets_received=c['packets'], commands_received=c['commands'],
-                inquiries_received=c['inquiries'], ignored_packets=c['ignored'],
-                inbox_overflows=c['overflows'], junk_bytes=self._framer.junk_bytes,
-                replies_sent=c['sent'], replies_dropped=c['dropped'],
-                replies_garbled=c['garbled'], errors_by_code=dict(self._errors))
+                packets_received=line['packets'], commands_received=handled['commands'],
+                inquiries_received=handled['inquiries'],
+                ignored_packets=line['ignored'] + handled['ignored'],
+                inbox_overflows=line['overflows'], junk_bytes=self._line.junk_bytes,
+                replies_sent=self._counts['sent'], replies_dropped=faults['dropped'],
+                replies_garbled=faults['garbled'], errors_by_code=dict(self._errors))
 
     # Fault injection ----------------------------------------------------------------------
 
     def reply_to_wrong_socket_once(self) -> None:
         """Swap sockets 1 and 2 in the next ACK, completion or socket error."""
         with self._lock:
-            self._wrong_socket_once = True
+            self._injector.wrong_socket_once = True
 
     def send_garbage(self, data: bytes) -> None:
         """Write ``data`` to the driver as they are (no faults applied)."""
         with self._lock:
-            self._send_now(bytes(data), time.monotonic())
+            self._line.send(bytes(data), time.monotonic())
         self._wake()
 
     def send_network_change(self) -> None:
         """Send Network Change ``z0 38 FF`` now (no faults applied)."""
         with self._lock:
-            self._send_now(network_change(self._reply_address()), time.monotonic())
+            self._line.send(network_change(self._device.reply_address()), time.monotonic())
         self._wake()
 
     def stop_answering(self, silent: bool = True) -> None:
@@ -514,11 +302,11 @@ class EmulatedEviD31:
         with self._lock:
             self._silent = bool(silent)
             if silent:
-                self._inbox.clear()
+                self._line.clear_inbox()
 
     def vanish(self) -> None:
         """Close the pty so the driver's port errors out, and remove the symlink."""
-        self._in_worker(self._close_pty)
+        self._in_worker(self._line.close)
 
     def restore(self) -> None:
         """Open a new pty after :meth:`vanish` and point the symlink at it."""
@@ -530,44 +318,11 @@ class EmulatedEviD31:
             self._power_up(time.monotonic())
         self._wake()
 
-    # Pty ----------------------------------------------------------------------------------
-
-    def _open_pty(self) -> None:
-        master, slave = os.openpty()
-        # Raw: no CR/LF or XON/XOFF translation and no echo (visca.md, "Serial line").
-        tty.setraw(slave)
-        attrs = termios.tcgetattr(slave)
-        attrs[4] = attrs[5] = termios.B9600
-        termios.tcsetattr(slave, termios.TCSANOW, attrs)
-        os.set_blocking(master, False)
-        self._master, self._slave = master, slave
-        self._slave_name = os.ttyname(slave)
-        if self.link_path:
-            temporary = f'{self.link_path}.{os.getpid()}.tmp'
-            if os.path.lexists(temporary):
-                os.unlink(temporary)
-            os.symlink(self._slave_name, temporary)
-            os.replace(temporary, self.link_path)
-        self._framer.reset()
-
-    def _close_pty(self) -> None:
-        if self.link_path and os.path.islink(self.link_path) \
-                and os.readlink(self.link_path) == self._slave_name:
-            os.unlink(self.link_path)
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                os.close(fd)
-        self._master = self._slave = self._slave_name = None
-        self._inbox.clear()
-        self._outbox.clear()
-        self._wire.clear()
-        self._framer.reset()
+    # Thread -------------------------------------------------------------------------------
 
     def _restore(self) -> None:
-        if self._master is None:
-            self._open_pty()
-
-    # Thread -------------------------------------------------------------------------------
+        if self._line.master is None:
+            self._line.open()
 
     def _wake(self) -> None:
         fd = self._wake_w
@@ -611,12 +366,12 @@ class EmulatedEviD31:
                     if next_field <= now:
                         # Fell behind (a stalled machine): resume the cadence from now.
                         next_field = now + period
-                self._pump_output(now)
+                self._line.pump(now)
                 wake_at = next_field
-                output_at = self._next_output_time()
+                output_at = self._line.next_output_time()
                 if output_at is not None:
                     wake_at = min(wake_at, output_at)
-                master = self._master
+                master = self._line.master
                 fds = [self._wake_r] + ([master] if master is not None else [])
             try:
                 readable, _, _ = select.select(fds, [], [], max(0.0, wake_at - time.monotonic()))
@@ -634,405 +389,62 @@ class EmulatedEviD31:
                     data = b''  # EIO/EAGAIN: nothing to read this time.
                 if data:
                     with self._lock:
-                        self._receive(data, time.monotonic())
-
-    # Input --------------------------------------------------------------------------------
-
-    def _receive(self, data: bytes, now: float) -> None:
-        for byte in data:
-            overlong = self._framer.overlong_packets
-            packets = self._framer.feed(bytes((byte,)))
-            if self._framer.overlong_packets != overlong:
-                self._enqueue(now, None, MAX_PACKET)
-            for packet in packets:
-                self._enqueue(now, packet, len(packet))
-
-    def _enqueue(self, now: float, packet: Optional[bytes], length: int) -> None:
-        self._counts['packets'] += 1
-        # The packet is complete once its bytes would have crossed the line at 9600 baud.
-        self._in_line_free = max(self._in_line_free, now)
-        if self.pace_output:
-            self._in_line_free += length * self.byte_s
-        if self._silent:
-            self._counts['ignored'] += 1
-        elif len(self._inbox) >= INBOX_LIMIT:
-            self._counts['overflows'] += 1
-        else:
-            self._inbox.append((self._in_line_free, packet))
-
-    # Output -------------------------------------------------------------------------------
-
-    def _reply(self, packet: bytes, now: float) -> None:
-        if self._silent or self._master is None:
-            return
-        if packet[0] != BROADCAST and packet[1] >> 4 == 0x6:
-            self._errors[packet[2]] += 1
-        if self._wrong_socket_once and packet[0] != BROADCAST and packet[1] >> 4 in (4, 5, 6) \
-                and packet[1] & 0x0F in SOCKETS:
-            self._wrong_socket_once = False
-            packet = bytes((packet[0], packet[1] ^ 0x03)) + packet[2:]
-        drop, garble = self.faults.drop_probability, self.faults.garble_probability
-        if drop > 0.0 and self._rng.random() < drop:
-            self._counts['dropped'] += 1
-            return
-        if garble > 0.0 and self._rng.random() < garble:
-            self._counts['garbled'] += 1
-            packet = self._garble(packet)
-        self._counts['sent'] += 1
-        self._outbox.append((now + max(0.0, self.faults.delay_s), packet))
-
-    def _send_now(self, packet: bytes, now: float) -> None:
-        # Explicit sends bypass the reply faults; without a pty they go nowhere.
-        if self._master is not None:
-            self._outbox.append((now, packet))
-
-    def _garble(self, packet: bytes) -> bytes:
-        data = bytearray(packet)
-        if self._rng.random() < 0.5:
-            data[self._rng.randrange(len(data))] ^= 1 << self._rng.randrange(8)
-        else:
-            at = self._rng.randrange(len(data) + 1)
-            data[at:at] = bytes(self._rng.randrange(256) for _ in range(self._rng.randint(1, 3)))
-        return bytes(data)
-
-    def _next_output_time(self) -> Optional[float]:
-        if self._master is None:
-            return None
-        if self._wire:
-            if not self.pace_output:
-                return self._wire_ready
-            return max(self._line_free, self._wire_ready) + self.byte_s
-        if self._outbox:
-            return self._outbox[0][0] + (self.byte_s if self.pace_output else 0.0)
-        return None
-
-    def _pump_output(self, now: float) -> None:
-        """Write the bytes whose time has come: one byte per 1.04 ms when paced."""
-        if self._master is None:
-            return
-        chunk = bytearray()
-        while True:
-            if not self._wire:
-                if not self._outbox or self._outbox[0][0] > now:
-                    break
-                self._wire_ready, packet = self._outbox.popleft()
-                self._wire.extend(packet)
-            if not self.pace_output:
-                chunk.extend(self._wire)
-                self._wire.clear()
-                continue
-            done = max(self._line_free, self._wire_ready) + self.byte_s
-            if done > now:
-                break
-            chunk.append(self._wire.popleft())
-            self._line_free = done
-        if chunk:
-            try:
-                os.write(self._master, bytes(chunk))
-            except OSError as exc:
-                # A full pty buffer loses bytes, like an overrun UART.
-                if exc.errno not in (errno.EAGAIN, errno.EIO):
-                    raise
+                        self._line.receive(data, time.monotonic(), discard=self._silent)
 
     # Camera -------------------------------------------------------------------------------
 
-    def _initialising(self, now: float) -> bool:
-        return now < self._init_end or any(
-            held is not None and held.kind == 'reset' for held in self._sockets.values())
-
-    def _reply_address(self) -> int:
-        return self._address or 1
-
     def _power_up(self, now: float) -> None:
-        self._stop_all(now)
-        self._sockets = dict.fromkeys(SOCKETS)
-        self._inbox.clear()
-        if self.require_address_set:
-            self._address = None
-        self._powered = True
-        self._focus_auto = True
-        self._pt_commanded = False
-        self._pan_limits = [-PAN_LIMIT_UNITS, PAN_LIMIT_UNITS]
-        self._tilt_limits = [-TILT_LIMIT_UNITS, TILT_LIMIT_UNITS]
-        self._initialise(now, self.init_s, zoom=True)
+        self._device.power_up(now)
+        self._line.clear_inbox()
         if not self._silent:
-            self._send_now(network_change(1), now)
-        if self._thread is None and self._master is not None:
+            self._line.send(network_change(1), now)
+        if self._thread is None and self._line.master is not None:
             # At start() it goes out before the port can be opened (so the driver's open
             # flushes it, as with a camera powered before the driver): deterministic.
-            self._pump_output(float('inf'))
-
-    def _initialise(self, now: float, duration: float, zoom: bool) -> None:
-        """Sweep both axes through their ends back to 0 (and zoom wide) in ``duration``."""
-        for axis, end in ((self._pan, PAN_LIMIT_UNITS), (self._tilt, TILT_LIMIT_UNITS)):
-            start = axis.at(now)
-            if duration <= 0.0:
-                axis.jump(now, 0.0)
-                continue
-            speed = (abs(end - start) + 3.0 * end) / duration
-            axis.go(now, [(end, speed), (-end, speed), (0.0, speed)])
-        if zoom:
-            start = self._zoom.at(now)
-            if duration <= 0.0 or start == 0.0:
-                self._zoom.jump(now, 0.0)
-            else:
-                self._zoom.go(now, [(0.0, start / duration)])
-            self._init_end = now + duration
-
-    def _stop_all(self, now: float) -> None:
-        for axis in (self._pan, self._tilt, self._zoom):
-            axis.stop(now)
+            self._line.pump(float('inf'))
 
     def _field(self, now: float) -> None:
         """Run one video field: completions first, then at most one received packet."""
-        self._tick += 1
-        for socket in SOCKETS:
-            held = self._sockets[socket]
-            if held is not None and self._held_done(held, now):
-                self._sockets[socket] = None
-                self._reply(completion(self._reply_address(), socket), now)
-        if self._inbox and self._inbox[0][0] <= now:
-            _, packet = self._inbox.popleft()
-            self._handle(packet, now)
-
-    def _held_done(self, held: _Held, now: float) -> bool:
-        if held.kind == 'instant':
-            return self._tick >= held.done_tick
-        if held.motion == 'zoom':
-            return not self._zoom.moving(now)
-        return not (self._pan.moving(now) or self._tilt.moving(now))
-
-    def _handle(self, packet: Optional[bytes], now: float) -> None:
-        if packet is None:
-            if self._address is not None:
-                self._reply(error(self._address, 0, ERROR_MESSAGE_LENGTH), now)
-            return
-        header = packet[0]
-        if header == BROADCAST:
-            self._broadcast(packet, now)
-            return
-        if not 0x81 <= header <= 0x87 or self._address is None \
-                or header & 0x0F != self._address:
-            self._counts['ignored'] += 1
-            return
-        address = self._address
-        body = packet[1:-1]
-        if len(body) < 1:
-            self._reply(error(address, 0, ERROR_MESSAGE_LENGTH), now)
-            return
-        if body[0] == 0x09:
-            self._counts['inquiries'] += 1
-            self._inquiry(body, now)
-            return
-        self._counts['commands'] += 1
-        if len(body) == 1 and body[0] >> 4 == 0x2:
-            self._cancel(body[0] & 0x0F, now)
-            return
-        if body == b'\x01\x00\x01':
-            self._if_clear(now)
-            self._reply(answer(address, b''), now)
-            return
-        try:
-            command = _parse_command(body)
-        except _SyntaxError:
-            self._reply(error(address, 0, ERROR_SYNTAX), now)
-            return
-        free = [s for s in SOCKETS if self._sockets[s] is None]
-        if not free:
-            self._reply(error(address, 0, ERROR_BUFFER_FULL), now)
-            return
-        socket = free[0]
-        if not self._executable(command, now):
-            self._reply(error(address, socket, ERROR_NOT_EXECUTABLE), now)
-            return
-        self._sockets[socket] = _Held(command.name, command.kind, command.motion,
-                                      done_tick=self._tick + 1)
-        self._reply(ack(address, socket), now)
-        self._execute(command, socket, now)
-
-    def _broadcast(self, packet: bytes, now: float) -> None:
-        if len(packet) == 4 and packet[1] == 0x30 and 1 <= packet[2] <= 7:
-            self._address = packet[2]
-            self._reply(address_set_reply(packet[2] + 1), now)
-        elif packet == bytes((BROADCAST, 0x01, 0x00, 0x01, TERMINATOR)):
-            self._if_clear(now)
+        for packet in self._responder.completions(now):
             self._reply(packet, now)
-        else:
-            self._counts['ignored'] += 1
+        interval = self.faults.phantom_ack_interval_s
+        if interval > 0.0 and now >= self._phantom_at:
+            self._phantom_at = now + interval
+            address = self._device.reply_address()
+            for socket in SOCKETS:
+                self._line.send(ack(address, socket), now)
+        if self._line.packet_due(now):
+            packet = self._line.next_packet()
+            refusal = self._injector.refusal(packet, self._device.address)
+            replies = refusal if refusal is not None else self._responder.handle(packet, now)
+            for reply in replies:
+                self._reply(reply, now)
 
-    def _if_clear(self, now: float) -> None:
-        self._sockets = dict.fromkeys(SOCKETS)
-        # The power-up initialisation is no command: it goes on (nothing else can move then).
-        if now >= self._init_end:
-            self._stop_all(now)
-
-    def _cancel(self, socket: int, now: float) -> None:
-        address = self._address
-        if socket not in SOCKETS:
-            self._reply(error(address, 0, ERROR_SYNTAX), now)
+    def _reply(self, packet: bytes, now: float) -> None:
+        if self._silent or self._line.master is None:
             return
-        held = self._sockets[socket]
-        if held is None:
-            self._reply(error(address, socket, ERROR_NO_SOCKET), now)
-            return
-        self._sockets[socket] = None
-        if held.motion == 'pt':
-            self._pan.stop(now)
-            self._tilt.stop(now)
-        elif held.motion == 'zoom':
-            self._zoom.stop(now)
-        self._reply(error(address, socket, ERROR_CANCELLED), now)
-
-    def _executable(self, command: _Command, now: float) -> bool:
-        if not self._powered:
-            return command.name == 'power'
-        if self._initialising(now):
-            return False
-        for held in self._sockets.values():
-            if held is not None and held.kind != 'instant' and command.motion is not None \
-                    and held.motion == command.motion:
-                return False
-        if command.name == 'focus_drive' and command.args[0] != 0x00 and self._focus_auto:
-            return False
-        if command.name == 'limit_set':
-            up_right, pan, tilt = command.args
-            if up_right:
-                return pan >= self._pan_limits[0] and tilt >= self._tilt_limits[0]
-            return pan <= self._pan_limits[1] and tilt <= self._tilt_limits[1]
-        return True
-
-    def _execute(self, command: _Command, socket: int, now: float) -> None:
-        name, args = command.name, command.args
-        if command.motion == 'pt':
-            self._pt_commanded = True
-        if name == 'drive':
-            pan_speed, tilt_speed, pan_dir, tilt_dir = args
-            # Pan 01 = left = negative units; tilt 01 = up = positive units.
-            self._drive(self._pan, self._pan_limits, now, {1: -1, 2: 1, 3: 0}[pan_dir],
-                        pan_speed_deg_s(pan_speed) * PAN_UNITS_PER_DEG)
-            self._drive(self._tilt, self._tilt_limits, now, {1: 1, 2: -1, 3: 0}[tilt_dir],
-                        tilt_speed_deg_s(tilt_speed) * TILT_UNITS_PER_DEG)
-        elif name in ('absolute', 'relative', 'home'):
-            if name == 'home':
-                pan_speed, tilt_speed, pan, tilt = PAN_SPEED_MAX, TILT_SPEED_MAX, 0, 0
-            else:
-                pan_speed, tilt_speed, pan, tilt = args
-            if name == 'relative':
-                pan += round(self._pan.at(now))
-                tilt += round(self._tilt.at(now))
-            pan = min(max(pan, self._pan_limits[0]), self._pan_limits[1])
-            tilt = min(max(tilt, self._tilt_limits[0]), self._tilt_limits[1])
-            self._pan.go(now, [(pan, pan_speed_deg_s(pan_speed) * PAN_UNITS_PER_DEG)])
-            self._tilt.go(now, [(tilt, tilt_speed_deg_s(tilt_speed) * TILT_UNITS_PER_DEG)])
-        elif name == 'reset':
-            self._initialise(now, self.reset_s, zoom=False)
-        elif name == 'zoom':
-            direction, speed = args
-            full_s = self.zoom_full_s if speed is None else self.zoom_full_s * 7.0 / speed
-            units_s = ZOOM_TELE / full_s
-            if direction == 0:
-                self._zoom.stop(now)
-            else:
-                self._zoom.go(now, [(ZOOM_TELE if direction > 0 else ZOOM_WIDE, units_s)])
-        elif name == 'zoom_direct':
-            self._zoom.go(now, [(args[0], ZOOM_TELE / self.zoom_full_s)])
-        elif name == 'focus_mode':
-            self._focus_auto = args[0]
-        elif name == 'power':
-            self._power(args[0], socket, now)
-        elif name == 'limit_set':
-            up_right, pan, tilt = args
-            self._pan_limits[1 if up_right else 0] = pan
-            self._tilt_limits[1 if up_right else 0] = tilt
-            self._replan_drives(now)
-        elif name == 'limit_clear':
-            if args[0]:
-                self._pan_limits[1], self._tilt_limits[1] = PAN_LIMIT_UNITS, TILT_LIMIT_UNITS
-            else:
-                self._pan_limits[0], self._tilt_limits[0] = -PAN_LIMIT_UNITS, -TILT_LIMIT_UNITS
-            self._replan_drives(now)
-
-    @staticmethod
-    def _drive(axis: _Axis, limits: List[int], now: float, direction: int,
-               speed: float) -> None:
-        position = axis.at(now)
-        if direction > 0:
-            axis.go(now, [(max(limits[1], position), speed)], direction, speed)
-        elif direction < 0:
-            axis.go(now, [(min(limits[0], position), speed)], direction, speed)
-        else:
-            axis.stop(now)
-
-    def _replan_drives(self, now: float) -> None:
-        for axis, limits in ((self._pan, self._pan_limits), (self._tilt, self._tilt_limits)):
-            if axis.drive:
-                self._drive(axis, limits, now, axis.drive, axis.drive_speed)
-
-    def _power(self, on: bool, socket: int, now: float) -> None:
-        if on and not self._powered:
-            self._powered = True
-            self._initialise(now, self.init_s, zoom=True)
-        elif not on and self._powered:
-            self._powered = False
-            self._stop_all(now)
-            self._init_end = 0.0
-            for other in SOCKETS:
-                if other != socket:
-                    self._sockets[other] = None
-
-    def _inquiry(self, body: bytes, now: float) -> None:
-        address = self._address
-        if body == b'\x09\x06\x12':
-            payload = pan_tilt_position_payload(round(self._pan.at(now)),
-                                                round(self._tilt.at(now)))
-        elif body == b'\x09\x04\x47':
-            payload = zoom_position_payload(round(self._zoom.at(now)))
-        elif body == b'\x09\x04\x00':
-            payload = bytes((POWER_ON if self._powered else POWER_STANDBY,))
-        elif body == b'\x09\x06\x11':
-            payload = bytes((PAN_SPEED_MAX, TILT_SPEED_MAX))
-        elif body == b'\x09\x06\x10':
-            status = self._pan_tilt_status(now)
-            payload = bytes((status >> 8, status & 0xFF))
-        elif body == b'\x09\x04\x38':
-            payload = bytes((0x02 if self._focus_auto else 0x03,))
-        elif body == b'\x09\x00\x02':
-            payload = bytes((VENDOR_ID >> 8, VENDOR_ID & 0xFF, MODEL_ID >> 8, MODEL_ID & 0xFF,
-                             ROM_VERSION >> 8, ROM_VERSION & 0xFF, len(SOCKETS)))
-        else:
-            self._reply(error(address, 0, ERROR_SYNTAX), now)
-            return
-        self._reply(answer(address, payload), now)
-
-    def _pan_tilt_status(self, now: float) -> int:
-        status = _INIT_RUNNING if self._initialising(now) else _INIT_DONE
-        if self._pan.moving(now) or self._tilt.moving(now):
-            status |= _MOTION_RUNNING
-        elif self._pt_commanded:
-            status |= _MOTION_DONE
-        pan, tilt = round(self._pan.at(now)), round(self._tilt.at(now))
-        if pan <= -PAN_LIMIT_UNITS:
-            status |= _END_LEFT
-        if pan >= PAN_LIMIT_UNITS:
-            status |= _END_RIGHT
-        if tilt >= TILT_LIMIT_UNITS:
-            status |= _END_UP
-        if tilt <= -TILT_LIMIT_UNITS:
-            status |= _END_DOWN
-        return status
+        if packet[0] != BROADCAST and packet[1] >> 4 == 0x6:
+            self._errors[packet[2]] += 1
+        sent = self._injector.reply(packet)
+        if sent is not None:
+            self._counts['sent'] += 1
+            self._line.send(sent[0], now + sent[1])
 
 
-def run_fake_camera(link_path: Optional[str], init_s: float) -> int:
+def run_fake_camera(link_path: Optional[str], init_s: float, faults: str = '') -> int:
     """
     Run an emulated EVI-D31 until Ctrl-C or SIGTERM and return 0.
 
     Prints one line ``fake EVI-D31 on <port>`` once the port can be opened.
+    ``faults``: knobs of :class:`Faults` as ``name=value,...`` (a broken
+    camera for trying the driver by hand); ConfigError for a bad one.
     """
+    camera = EmulatedEviD31(init_s=init_s, link_path=link_path)
+    camera.faults.apply(faults)
     stopped = threading.Event()
     previous = None
     if threading.current_thread() is threading.main_thread():
         previous = signal.signal(signal.SIGTERM, lambda signum, frame: stopped.set())
-    camera = EmulatedEviD31(init_s=init_s, link_path=link_path)
     try:
         camera.start()
         print(f'fake EVI-D31 on {camera.port}', flush=True)

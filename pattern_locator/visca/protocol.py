@@ -12,6 +12,7 @@ layer's job.
 """
 
 from dataclasses import dataclass
+import math
 from typing import List, Optional, Tuple
 
 from ..errors import PatternLocatorError
@@ -19,6 +20,14 @@ from ..errors import PatternLocatorError
 
 class ViscaError(PatternLocatorError):
     """A VISCA packet that is malformed, or a value out of the protocol's range."""
+
+
+class ViscaReplyError(ViscaError):
+    """
+    A reply that is framed but impossible: a value outside the camera's range, a bad socket.
+
+    The driver drops it (and counts it) instead of reporting what it says.
+    """
 
 
 TERMINATOR = 0xFF
@@ -37,6 +46,19 @@ PAN_MAX_DEG_S = 80.0
 TILT_MAX_DEG_S = 50.0
 ZOOM_WIDE = 0x0000
 ZOOM_TELE = 0x03FF
+# A position answer further out than the travel plus this margin is malformed: the head
+# can overshoot its nominal end by a unit or two, never by a degree.
+TRAVEL_MARGIN_DEG = 1.0
+PAN_ANSWER_LIMIT_UNITS = PAN_LIMIT_UNITS + int(math.ceil(TRAVEL_MARGIN_DEG * PAN_UNITS_PER_DEG))
+TILT_ANSWER_LIMIT_UNITS = TILT_LIMIT_UNITS + int(math.ceil(TRAVEL_MARGIN_DEG
+                                                           * TILT_UNITS_PER_DEG))
+# The command sockets of the EVI-D30/D31 (the version answer says 2).
+COMMAND_SOCKETS = (1, 2)
+# The camera takes one packet per video field (ACK within ~17/20 ms) and completes an
+# instant command (Drive, Stop, zoom tele/wide/stop, focus, LimitSet) in the next field.
+# A completion that has not come after this is lost: 50 fields, the low end of the
+# 1-3 s that public drivers wait (visca.md, "Replies").
+INSTANT_COMMAND_S = 1.0
 ZOOM_SPEED_MIN = 2
 ZOOM_SPEED_MAX = 7
 
@@ -424,18 +446,42 @@ def parse_reply(packet: bytes) -> Reply:
     raise ViscaError(f'unknown reply: {hex_bytes(packet)}')
 
 
+def _answer_nibbles(payload: bytes, signed: bool) -> int:
+    try:
+        return decode_nibbles(payload, signed=signed)
+    except ViscaError as exc:
+        raise ViscaReplyError(str(exc)) from None
+
+
 def parse_pan_tilt_position(payload: bytes) -> Tuple[int, int]:
-    """Return (pan, tilt) in camera units from the position answer's payload."""
+    """
+    Return (pan, tilt) in camera units from the position answer's payload.
+
+    ViscaReplyError for a payload that is not 8 nibble bytes, or a position
+    outside the travel plus :data:`TRAVEL_MARGIN_DEG` (never reported).
+    """
     if len(payload) != 8:
-        raise ViscaError(f'pan-tilt position answer needs 8 bytes, got {hex_bytes(payload)}')
-    return decode_nibbles(payload[:4]), decode_nibbles(payload[4:])
+        raise ViscaReplyError(f'pan-tilt position answer needs 8 bytes, got '
+                              f'{hex_bytes(payload)}')
+    pan, tilt = _answer_nibbles(payload[:4], True), _answer_nibbles(payload[4:], True)
+    if abs(pan) > PAN_ANSWER_LIMIT_UNITS or abs(tilt) > TILT_ANSWER_LIMIT_UNITS:
+        raise ViscaReplyError(
+            f'pan-tilt position answer {hex_bytes(payload)} is outside the travel: pan {pan} '
+            f'units ({pan_degrees(pan):.1f} deg), tilt {tilt} units '
+            f'({tilt_degrees(tilt):.1f} deg); the camera reaches +-{PAN_LIMIT_UNITS} and '
+            f'+-{TILT_LIMIT_UNITS}')
+    return pan, tilt
 
 
 def parse_zoom_position(payload: bytes) -> int:
-    """Return the zoom position (0..3FFh) from the zoom answer's payload."""
+    """Return the zoom position (0..3FFh) from the zoom answer's payload; ViscaReplyError."""
     if len(payload) != 4:
-        raise ViscaError(f'zoom position answer needs 4 bytes, got {hex_bytes(payload)}')
-    return decode_nibbles(payload, signed=False)
+        raise ViscaReplyError(f'zoom position answer needs 4 bytes, got {hex_bytes(payload)}')
+    position = _answer_nibbles(payload, False)
+    if not ZOOM_WIDE <= position <= ZOOM_TELE:
+        raise ViscaReplyError(f'zoom position answer {hex_bytes(payload)} is {position:04X}h, '
+                              f'outside {ZOOM_WIDE:04X}h..{ZOOM_TELE:04X}h')
+    return position
 
 
 def parse_power(payload: bytes) -> bool:
@@ -469,12 +515,19 @@ class PacketFramer:
 
     Bytes before a header are junk and dropped (counted in ``junk_bytes``);
     a packet that grows past 16 bytes without FF is dropped as well (counted
-    in ``overlong_packets``: the camera's message length error). Feed it
-    whatever the port returned: partial reads and several packets at once.
+    in ``overlong_packets``: the camera's message length error). With
+    ``resync`` only the bytes before the next header byte in it are dropped,
+    so a packet that follows a garbled one without its FF is still found.
+    Feed it whatever the port returned: partial reads and several packets at
+    once. Every packet it returns is 2..16 bytes, starts with a header byte
+    and ends with FF; an FF always ends the packet being collected, so
+    whatever garbage came before, the packet after the next FF is framed
+    exactly.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, resync: bool = False) -> None:
         self._buffer = bytearray()
+        self._resync = resync
         self.junk_bytes = 0
         self.overlong_packets = 0
 
@@ -493,10 +546,18 @@ class PacketFramer:
                 packets.append(bytes(self._buffer))
                 self._buffer.clear()
             elif len(self._buffer) >= MAX_PACKET:
-                self.junk_bytes += len(self._buffer)
                 self.overlong_packets += 1
-                self._buffer.clear()
+                drop = self._next_header() if self._resync else len(self._buffer)
+                self.junk_bytes += drop
+                del self._buffer[:drop]
         return packets
+
+    def _next_header(self) -> int:
+        """Return the index of the first header byte after the start (the length if none)."""
+        for i in range(1, len(self._buffer)):
+            if self._buffer[i] & 0x80:
+                return i
+        return len(self._buffer)
 
     def reset(self) -> None:
         """Drop a partial packet (after a reconnect)."""

@@ -82,10 +82,16 @@ def test_start_gives_up_with_a_clear_error(emulator):
         cam.close()
 
 
-def test_start_gives_up_on_a_missing_port(tmp_path):
-    cam = EviD31(str(tmp_path / 'nothing'))
-    with pytest.raises(ViscaConnectionError, match='gave up after 0.3 s'):
-        cam.start(timeout_s=0.3)
+def test_start_fails_at_once_on_a_missing_port_with_one_clear_line(tmp_path):
+    port = tmp_path / 'nothing'
+    cam = EviD31(str(port))
+    # One attempt, no retries inside start(): the caller (the node) retries with its backoff.
+    with pytest.raises(ViscaConnectionError) as info:
+        cam.start(timeout_s=30.0)
+    assert str(info.value) == f'VISCA port {port} does not exist'
+    assert not cam.transport.is_open
+    assert not any(th.name.startswith('visca-') for th in threading.enumerate())
+    cam.close()
 
 
 def test_position_round_trip_in_rep103_signs(emulator, camera):

@@ -505,7 +505,7 @@ def test_stops_answering_then_reconnects(rig):
     for _ in range(2):
         with pytest.raises(ViscaTimeout):
             t.inquiry(POSITION_INQ)
-    assert not t.connected and '2 requests in a row' in t.last_error
+    assert not t.connected and 'did not answer 2 requests in a row' in t.last_error
     silent.clear()
     assert reconnected.wait(2.0)
     assert t.connected and t.inquiry(POSITION_INQ).raw == POSITION_ANSWER

@@ -150,6 +150,10 @@ def _parser() -> argparse.ArgumentParser:
     fake.add_argument('--link', help='also reach it through this path (a symlink)')
     fake.add_argument('--init-s', type=float, default=2.0,
                       help='power-up initialisation time (default 2 s)')
+    fake.add_argument('--faults', default='', metavar='SPEC',
+                      help='play a broken camera: name=value,... e.g. '
+                           "'bad_position_probability=0.3,lose_completions=1' "
+                           '(an unknown name lists the known ones)')
     fake.set_defaults(handler=_fake_camera)
 
     demo = sub.add_parser('demo', help="the simulated robot on the paper's route (make demo)",
@@ -334,7 +338,7 @@ def _bag_play(args: argparse.Namespace) -> int:
 
 def _fake_camera(args: argparse.Namespace) -> int:
     from .visca.emulator import run_fake_camera
-    return run_fake_camera(args.link, args.init_s)
+    return run_fake_camera(args.link, args.init_s, args.faults)
 
 
 def _demo(args: argparse.Namespace) -> int:

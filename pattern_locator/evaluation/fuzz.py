@@ -141,7 +141,8 @@ def _joints(ns: int, names: Sequence[str], positions: Sequence[float]):
 
 def _garbage_text(rng: np.random.Generator) -> str:
     length = int(rng.choice([1, 20, 300, 5000, 135_000]))
-    alphabet = 'abcXYZ019_/\\\'"\n\r\t\x00\x1b[31m\u00e9\u4e2d\U0001f600 '
+    # No NUL: a ROS string cannot hold one (DDS would cut the string there).
+    alphabet = 'abcXYZ019_/\\\'"\n\r\t\x07\x1b[31m\u00e9\u4e2d\U0001f600 '
     return ''.join(rng.choice(list(alphabet), size=length))
 
 

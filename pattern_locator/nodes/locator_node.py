@@ -226,8 +226,9 @@ class LocatorNode(Node):
         self.pub_target = self.create_publisher(PointStamped, 'pattern_locator/target', 10)
         self.pub_debug = self.create_publisher(Image, 'pattern_locator/debug_image', 1)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        image_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-        self.create_subscription(Image, 'camera/image_raw', self._on_image, image_qos)
+        self._image_sub = self._subscribe_images()
+        # The worker asks the executor thread to renew the image subscription.
+        self._renew_images = self.create_guard_condition(self._on_renew_images)
         self.create_subscription(CameraInfo, 'camera/camera_info', self._on_camera_info,
                                  qos_profile_sensor_data)
         # Joint states are reliable, as ROS publishes them (robot_state_publisher).
@@ -236,6 +237,26 @@ class LocatorNode(Node):
         wall_timer(self, 1.0, self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='locator-worker', daemon=True)
         self._worker.start()
+
+    def _subscribe_images(self) -> Any:
+        # Best effort, like the sensor-data profile, but only the newest frame:
+        # the node processes no other, and the reader keeps no backlog of
+        # large frames.
+        return self.create_subscription(
+            Image, 'camera/image_raw', self._on_image,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+    def _on_renew_images(self) -> None:
+        """
+        Give back what a burst of big frames left behind (executor thread, when idle).
+
+        The DDS reader keeps buffers as large as the largest frame it took;
+        a new reader starts small. Then the heap's free top goes back.
+        """
+        self.destroy_subscription(self._image_sub)
+        self._image_sub = self._subscribe_images()
+        self.heap.trim()
+        self.stats['renewals'] = self.stats.get('renewals', 0) + 1
 
     # Parameters ---------------------------------------------------------------
 
@@ -346,7 +367,7 @@ class LocatorNode(Node):
                 while self._latest is None and not self._stopping:
                     if not self._wake.wait(0.5) and large:
                         # Idle after big frames: give their buffers back.
-                        self.heap.trim()
+                        self._renew_images.trigger()
                         large = False
                 if self._stopping:
                     return

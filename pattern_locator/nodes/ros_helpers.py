@@ -343,6 +343,13 @@ def run_node(make_node: Callable[[], Node], name: str, args=None) -> None:
             _ignore_signals()
             print(f'{name}: error: {clean_text(str(exc), 400)}', file=sys.stderr, flush=True)
             code = 1
+        except Exception:  # noqa: B902 - see below
+            # A signal shuts the context down at once, also under a callback
+            # that is still running: its next publish fails. That is the
+            # shutdown, not an error; anything else is.
+            if rclpy.ok():
+                raise
+            _ignore_signals()
         finally:
             _ignore_signals()
             if node is not None:

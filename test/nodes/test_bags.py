@@ -177,7 +177,7 @@ def client():
 
 @pytest.fixture(scope='module')
 def chatter(tmp_path_factory):
-    """A bag as another robot might have recorded it: other topics, sqlite3 storage."""
+    """Return a bag as another robot might have recorded it: other topics, sqlite3 storage."""
     path = tmp_path_factory.mktemp('bags') / 'chatter'
     with Writer(path, version=8, storage_plugin=StoragePlugin.SQLITE3) as writer:
         connection = writer.add_connection('/chatter', 'std_msgs/msg/String',

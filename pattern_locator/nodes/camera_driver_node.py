@@ -171,6 +171,7 @@ class CameraDriverNode(Node):
         self.problems = ProblemLog(self.get_logger(), THROTTLE_S)
         # Changes for the camera thread, applied between two cycles.
         self._pending: Dict[str, Any] = {}
+        self._tracking_on = bool(p['tracking'])
         self._pending_lock = threading.Lock()
         self._focal_by_stamp: 'collections.OrderedDict[int, float]' = collections.OrderedDict()
         self._focal: Optional[float] = None
@@ -211,6 +212,9 @@ class CameraDriverNode(Node):
 
     def _apply(self, changed: Dict[str, Any]) -> None:
         self.params = {**self.params, **changed}
+        # Targets stop reaching the controller at once; the camera thread
+        # swaps the controller and stops the head at its next cycle.
+        self._tracking_on = bool(self.params['tracking'])
         with self._pending_lock:
             self._pending.update(changed)
 
@@ -224,10 +228,16 @@ class CameraDriverNode(Node):
         if 'zoom_every' in changed:
             self.loop.zoom_every = max(1, int(p['zoom_every']))
         if set(changed) & set(TRACKING_PARAMETERS + ('tracking',)):
-            # A new controller: its history is short (the next targets rebuild it).
+            # A new controller (its history is short: the next targets rebuild
+            # it), or none; either way the head stops first, since the last
+            # Drive would otherwise run on.
             self.loop.controller = (TrackingController(tracking_params(p)) if p['tracking']
                                     else None)
             self.loop.reset_tracking()
+            try:
+                self.camera.stop()
+            except ViscaError as exc:
+                self.problems.report('camera', f'no stop after a tracking change: {exc}')
 
     # Callbacks ----------------------------------------------------------------------
 
@@ -251,6 +261,8 @@ class CameraDriverNode(Node):
             self._focal_by_stamp.popitem(last=False)
 
     def _on_target(self, msg: PointStamped) -> None:
+        if not self._tracking_on:
+            return
         point = (msg.point.x, msg.point.y, msg.point.z)
         if not all_finite(point) or point[2] <= 0.0:
             self.problems.report('target', f'ignored a target that is not a point in front of '

@@ -152,6 +152,9 @@ def rejection_reasons(result: FrameResult) -> Sequence[str]:
         return [str(r)[:40] for r in reasons]
     keys = []
     for text in result.problems:
+        if 'not in the building map' in str(text):
+            keys.append('not in the building map')
+            continue
         head, _, rest = str(text).partition(': ')
         if head.startswith('card ') and rest:
             text = rest

@@ -30,6 +30,8 @@ from ..vision.geometry import Pose, quaternion_xyzw
 QUOTE_CHARS = 80
 # A log line about bad input never exceeds this.
 PROBLEM_CHARS = 240
+# Problems are counted by at most this many kinds, 'other' included.
+MAX_KINDS = 64
 
 
 # Parameters ------------------------------------------------------------------------------
@@ -223,6 +225,8 @@ class ProblemLog:
         """Count a problem of ``kind``; log it unless this kind was logged lately."""
         text = clean_text(text)
         with self._lock:
+            if kind not in self.counts and len(self.counts) >= MAX_KINDS - 1:
+                kind = 'other'
             self.counts[kind] = self.counts.get(kind, 0) + 1
             self.last[kind] = text
             self.last_text = text

@@ -303,7 +303,7 @@ def replay(locator, client, rate, listener=None):
     # The player joins this process's graph (already matched with the locator);
     # delivery is checked below, so the acknowledgements are not waited for long.
     count = play(BAG, rate=rate, context=node.context, wait_for_subscribers=list(SIM_TOPICS),
-                 wait_acked_s=0.5)
+                 wait_acked_s=0.2)
     finished = time.time()
     assert count == 150
 

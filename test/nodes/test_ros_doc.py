@@ -1,4 +1,4 @@
-"""docs/ros.md documents every parameter of every node, as declared."""
+"""docs/ros.md documents every parameter of every node, as declared; the problem log."""
 
 import importlib
 from pathlib import Path
@@ -18,3 +18,28 @@ def test_every_parameter_is_in_the_doc_as_declared(module):
                                             section, re.MULTILINE)}
     declared = importlib.import_module(f'pattern_locator.nodes.{module}').PARAMETERS
     assert rows == {p.name: 'dynamic' if p.dynamic else 'read-only' for p in declared}
+
+
+def test_problems_are_throttled_by_kind_and_cut():
+    """ProblemLog: one line per kind and period, however varied the text; counts bounded."""
+    from pattern_locator.nodes.ros_helpers import MAX_KINDS, ProblemLog
+
+    class Logger:
+        def __init__(self):
+            self.lines = []
+
+        def warning(self, text):
+            self.lines.append(text)
+
+    logger = Logger()
+    log = ProblemLog(logger, period_s=3600.0)
+    for i in range(1000):
+        log.report('image', f"unsupported image encoding '{'x' * i}\n{i}'")
+    for i in range(200):
+        log.report(f'rejected: reason {i}', 'text')
+    counts, last = log.snapshot()
+    assert counts['image'] == 1000
+    assert len(counts) == MAX_KINDS and counts['other'] == 200 - (MAX_KINDS - 2)
+    assert len([line for line in logger.lines if 'encoding' in line]) == 1
+    assert all(len(line) < 300 and '\n' not in line for line in logger.lines)
+    assert '\n' not in last

@@ -41,7 +41,9 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PointStamped
     from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import JointState
+    from pattern_locator.nodes.image_codec import fill_camera_info
+    from pattern_locator.vision.camera import CameraModel
+    from sensor_msgs.msg import CameraInfo, JointState
     from std_srvs.srv import Trigger
     from test_locator_node import ParameterClient
 
@@ -61,12 +63,17 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
 
         # Track a card 0.3 rad to the left and 0.1 rad up, given like the
         # locator does: its centre in the optical frame of "the image", stamped then.
-        def aim(pan_goal, tilt_goal, seconds):
+        info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', 10)
+
+        def aim(pan_goal, tilt_goal, seconds, info=None):
             end = time.monotonic() + seconds
             while time.monotonic() < end:
                 state = camera.state()
                 msg = PointStamped()
                 msg.header.stamp = node.get_clock().now().to_msg()
+                if info is not None:
+                    info.header.stamp = msg.header.stamp
+                    info_pub.publish(info)
                 msg.header.frame_id = 'camera_optical_frame'
                 msg.point.x, msg.point.y, msg.point.z = target_point(
                     pan_goal + math.radians(state.pan_deg),      # REP 103: left = +
@@ -104,6 +111,16 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         assert camera.state().pan_deg == pytest.approx(math.degrees(0.2), abs=1.0)
         assert spin_until(executor, lambda: diagnostics and diagnostics[-1].status[0].level
                           == DiagnosticStatus.OK, 3.0)
+        # Zoom: the card's apparent size comes from its distance and the fx of
+        # the target's camera_info: 3 m at fx 554 px is 21 px, under the 120
+        # px aimed at, so the camera zooms in.
+        info = CameraInfo()
+        fill_camera_info(info, CameraModel.from_fov(640, 480, 60.0))
+        zoom = camera.state().zoom_units
+        assert params.set_value('zoom_control', True)[0]
+        aim(-0.2, 0.0, 2.0, info)
+        assert camera.state().zoom_units > zoom + 100, (zoom, camera.state())
+        assert params.set_value('zoom_control', False)[0]
 
         # Garbage on the line and a Network Change: joint states keep coming.
         camera.send_garbage(bytes([0x00, 0x13, 0x0D, 0x90, 0x41]))

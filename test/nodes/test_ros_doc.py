@@ -25,6 +25,7 @@ def test_problems_are_throttled_by_kind_and_cut():
     from pattern_locator.nodes.ros_helpers import MAX_KINDS, ProblemLog
 
     class Logger:
+
         def __init__(self):
             self.lines = []
 

@@ -468,6 +468,10 @@ class LocatorNode(Node):
                     break
                 if (covered and now >= short) or now >= long or self._stopping:
                     break
+                if not covered and self._latest is not None:
+                    # A newer frame is waiting: it has better chances (a live
+                    # camera whose driver is not publishing yet).
+                    break
                 self._joint_arrived.wait((short if covered else long) - now)
         try:
             return self.joints.at(stamp)

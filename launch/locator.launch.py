@@ -1,19 +1,61 @@
-"""Launch the locator node with the shipped parameters (a real ROS 2 Jazzy install)."""
+"""
+Launch the locator (a real ROS 2 Jazzy install).
+
+    ros2 launch pattern_locator locator.launch.py [namespace:=robot2]
+        [use_sim_time:=true] [params_file:=my_locator.yaml] [log_level:=debug]
+
+The node gets the installed ``config/locator.yaml``, then ``params_file`` when
+one is given (its ``/**/locator`` section overrides the installed values).
+The launch modules are imported inside the functions, so this file also
+imports where ``launch`` is not installed (its argument table is tested).
+"""
 
 import os
 
-from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
-from launch.actions import SetEnvironmentVariable
-from launch_ros.actions import Node
+PACKAGE = 'pattern_locator'
+
+# The declared launch arguments: name, default, description.
+ARGUMENTS = (
+    ('namespace', '', 'namespace of the node and its topics (e.g. robot2; empty: none)'),
+    ('use_sim_time', 'false', 'take the time from /clock (a simulation, a bag played with '
+     '--clock)'),
+    ('params_file', '', 'parameter file applied after the installed config/locator.yaml '
+     '(empty: the installed file alone)'),
+    ('log_level', 'info', 'log level: debug, info, warn, error or fatal'),
+)
+
+
+def node_parameters(share: str, config: str, params_file: str, use_sim_time: str) -> list:
+    """Return a node's parameters: the installed file, the given one, use_sim_time."""
+    files = [os.path.join(share, 'config', config)] + ([params_file] if params_file else [])
+    return files + [{'use_sim_time': use_sim_time.strip().lower() in ('true', '1', 'yes')}]
+
+
+def _nodes(context):
+    from ament_index_python.packages import get_package_share_directory
+    from launch_ros.actions import Node
+
+    def arg(name):
+        return context.launch_configurations[name]
+
+    share = get_package_share_directory(PACKAGE)
+    return [Node(package=PACKAGE, executable='locator', name='locator',
+                 namespace=arg('namespace'), output='screen',
+                 parameters=node_parameters(share, 'locator.yaml', arg('params_file'),
+                                            arg('use_sim_time')),
+                 ros_arguments=['--log-level', arg('log_level')])]
 
 
 def generate_launch_description():
-    share = get_package_share_directory('pattern_locator')
-    return LaunchDescription([
-        # Room for camera images in Fast DDS's shared memory.
-        SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE',
-                               os.path.join(share, 'config', 'fastdds_large_messages.xml')),
-        Node(package='pattern_locator', executable='locator', name='locator', output='screen',
-             parameters=[os.path.join(share, 'config', 'locator.yaml')]),
-    ])
+    from ament_index_python.packages import get_package_share_directory
+    from launch import LaunchDescription
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction, SetEnvironmentVariable
+
+    share = get_package_share_directory(PACKAGE)
+    return LaunchDescription(
+        [DeclareLaunchArgument(name, default_value=default, description=description)
+         for name, default, description in ARGUMENTS] + [
+            # Room for camera images in Fast DDS's shared memory.
+            SetEnvironmentVariable('FASTRTPS_DEFAULT_PROFILES_FILE',
+                                   os.path.join(share, 'config', 'fastdds_large_messages.xml')),
+            OpaqueFunction(function=_nodes)])

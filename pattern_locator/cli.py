@@ -128,6 +128,11 @@ def _parser() -> argparse.ArgumentParser:
                        help='the tracking loop in closed loop (sim + camera_driver + locator)')
     bench.add_argument('--node', action='store_true',
                        help='the locator node end to end over DDS: throughput and latency')
+    bench.add_argument('--fuzz', action='store_true',
+                       help='malformed messages into a locator process: poses for bad input, '
+                            'non-finite values, tracebacks, memory, log volume')
+    bench.add_argument('--messages', type=int, default=32_000,
+                       help='messages of the --fuzz run (default 32000; --quick: 3000)')
     bench.set_defaults(handler=_bench)
 
     bag = sub.add_parser('bag', help='record a simulated route, or play a bag into ROS',
@@ -142,6 +147,21 @@ def _parser() -> argparse.ArgumentParser:
     play = bag_sub.add_parser('play', help='publish a bag with its recorded timing')
     play.add_argument('bag', help='bag directory (or .mcap / .db3 file)')
     play.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    play.add_argument('--topics', nargs='+', metavar='TOPIC', help='play only these topics')
+    play.add_argument('--remap', nargs='+', metavar='FROM:=TO', default=[],
+                      help='publish a bag topic under another name')
+    play.add_argument('--wait-for-subscribers', nargs='*', metavar='TOPIC',
+                      help='publish nothing before these topics (none named: every played '
+                           'topic) have a subscriber')
+    play.add_argument('--wait-timeout', type=float, default=30.0, metavar='S',
+                      help='give up waiting for subscribers after this (default 30 s)')
+    play.add_argument('--clock', nargs='?', type=float, const=40.0, default=0.0, metavar='HZ',
+                      help='publish the bag time on /clock (default 40 Hz)')
+    play.add_argument('--loop', action='store_true', help='play again and again until Ctrl-C')
+    play.add_argument('--start-offset', type=float, default=0.0, metavar='S',
+                      help="skip the bag's first S seconds")
+    play.add_argument('--delay', type=float, default=0.0, metavar='S',
+                      help='wait S seconds before playing (each loop)')
     play.set_defaults(handler=_bag_play)
 
     fake = sub.add_parser('fake-camera', help='an emulated EVI-D31 on a pseudo-terminal',
@@ -319,6 +339,12 @@ def _bench(args: argparse.Namespace) -> int:
     if args.tracking:
         from .evaluation.bench_tracking import run_tracking_bench
         return run_tracking_bench()
+    if args.fuzz:
+        from .evaluation.fuzz import run_fuzz_bench
+        if args.messages < 100:
+            raise ConfigError(f'bench --fuzz: --messages must be at least 100, got '
+                              f'{args.messages}')
+        return run_fuzz_bench(messages=3000 if args.quick else args.messages, seed=args.seed)
     if args.node:
         from .evaluation.bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
@@ -332,8 +358,13 @@ def _bag_record(args: argparse.Namespace) -> int:
 
 
 def _bag_play(args: argparse.Namespace) -> int:
-    from .nodes.bags import play_main
-    return play_main(args.bag, rate=args.rate)
+    from .nodes.bags import parse_remaps, play_main
+    return play_main(args.bag, rate=args.rate, topics=args.topics,
+                     remap=parse_remaps(args.remap),
+                     wait_for_subscribers=args.wait_for_subscribers,
+                     discovery_timeout_s=args.wait_timeout, clock_hz=args.clock,
+                     loops=0 if args.loop else 1, start_offset_s=args.start_offset,
+                     delay_s=args.delay)
 
 
 def _fake_camera(args: argparse.Namespace) -> int:

@@ -168,7 +168,7 @@ def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
         tight = _core_ms(camera, frames)
         core = _core_ms(camera, frames, rate_hz)
         result = _run_node_bench(camera, frames, rate_hz)
-        node_ms = result['node'].get('frame_ms_median')
+        node_ms = result['node'].get('in_node_ms_median')
         node = float(node_ms) if node_ms is not None else math.nan
         print(f'{f"{camera.width}x{camera.height}":<12}{tight:>11.2f}{core:>9.2f}{node:>9.2f}'
               f'{result["median_ms"]:>13.2f}{result["p95_ms"]:>8.2f}'

@@ -28,6 +28,7 @@ from ..errors import PatternLocatorError
 from ..localization.building import BuildingMap, load_building
 from ..localization.head import HeadGeometry, JointStateBuffer
 from ..nodes.node_process import node_process
+from ..nodes.ros_helpers import head_motion_to_point
 from ..resources import config_path
 from ..sim.world import SimRoute
 from ..vision.geometry import Pose, rotation_from_quaternion
@@ -49,7 +50,8 @@ class Frame:
     true_camera: Optional[Pose] = None
     located_base: Optional[Pose] = None
     ids: Optional[Tuple[int, int, int]] = None
-    true_target: Optional[Tuple[float, float, int]] = None
+    # The head turn (pan, tilt, rad) that centres the sim's target card, and its distance (m).
+    true_target: Optional[Tuple[float, float, float]] = None
 
 
 def pose_from_msg(msg) -> Pose:
@@ -157,33 +159,44 @@ def tracking_errors_deg(frames: Dict[int, Frame]) -> np.ndarray:
     return np.array(values)
 
 
-class Observer:
-    """A node in this process that records the truth, the locations and the head angles."""
+def target_angles(x: float, y: float, z: float) -> Tuple[float, float, float]:
+    """Return (pan, tilt, distance) of a card centre given in the optical frame (metres)."""
+    pan, tilt = head_motion_to_point(x, y, z)
+    return pan, tilt, math.sqrt(x * x + y * y + z * z)
 
-    def __init__(self, context) -> None:
+
+class Observer:
+    """
+    A node in this process that records the truth, the locations and the head angles.
+
+    ``namespace``: the robot's (its topics are relative to it).
+    """
+
+    def __init__(self, context, namespace: str = '') -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PointStamped, PoseStamped
         import rclpy
-        from rclpy.qos import qos_profile_sensor_data
+        from rclpy.qos import QoSProfile
         from sensor_msgs.msg import JointState
         from std_msgs.msg import UInt16MultiArray
 
-        self.node = rclpy.create_node('demo_observer', context=context)
+        self.node = rclpy.create_node('demo_observer', context=context,
+                                      namespace='/' + namespace.strip('/'))
         self.frames: Dict[int, Frame] = {}
         self.joints = JointStateBuffer(history_s=600.0, max_gap_s=0.5)
         self.last_ids: Dict[int, Tuple[int, int, int]] = {}
         self.located = 0
         n = self.node
-        n.create_subscription(PoseStamped, '/sim/true_pose',
+        n.create_subscription(PoseStamped, 'sim/true_pose',
                               lambda m: self._put(m, 'true_base', pose_from_msg(m.pose)), 100)
-        n.create_subscription(PoseStamped, '/sim/true_camera_pose',
+        n.create_subscription(PoseStamped, 'sim/true_camera_pose',
                               lambda m: self._put(m, 'true_camera', pose_from_msg(m.pose)), 100)
-        n.create_subscription(PointStamped, '/sim/true_target', lambda m: self._put(
-            m, 'true_target', (m.point.x, m.point.y, int(m.point.z))), 100)
-        n.create_subscription(PoseStamped, '/robot_location', self._on_location, 100)
-        n.create_subscription(UInt16MultiArray, '/robot_location/ids', self._on_ids, 100)
-        n.create_subscription(JointState, '/camera/joint_states', self._on_joints,
-                              qos_profile_sensor_data)
+        n.create_subscription(PointStamped, 'sim/true_target', lambda m: self._put(
+            m, 'true_target', target_angles(m.point.x, m.point.y, m.point.z)), 100)
+        n.create_subscription(PoseStamped, 'robot_location', self._on_location, 100)
+        n.create_subscription(UInt16MultiArray, 'robot_location/ids', self._on_ids, 100)
+        n.create_subscription(JointState, 'camera/joint_states', self._on_joints,
+                              QoSProfile(depth=100))
         n.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
         # (arrival time, key -> value) of the camera driver's diagnostics.
         self.driver_diagnostics: List[Tuple[float, Dict[str, str]]] = []
@@ -235,8 +248,8 @@ def route_stops_parameter(route: SimRoute) -> str:
 
 def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
                     zoom_control: bool = False, timeout_s: float = 150.0,
-                    driver_parameters: Sequence[str] = (), custom_route: bool = False
-                    ) -> Observer:
+                    driver_parameters: Sequence[str] = (), custom_route: bool = False,
+                    namespace: str = '') -> Observer:
     """
     Run sim, camera_driver and locator as processes along ``route``; return what was seen.
 
@@ -244,6 +257,7 @@ def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
     time (or after ``timeout_s``, with a message). Node logs go to ``out``.
     ``custom_route``: the sim is given the route's stops (else it builds the
     paper route from the stop count, which must give the same route).
+    ``namespace``: run the robot (its nodes and topics) in it.
     """
     import rclpy
     from rclpy.context import Context
@@ -255,7 +269,7 @@ def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
     out.mkdir(parents=True, exist_ok=True)
     context = Context()
     rclpy.init(context=context)
-    observer = Observer(context)
+    observer = Observer(context, namespace)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(observer.node)
     link = Path(tempfile.mkdtemp(prefix='pattern_locator_demo_')) / 'evi_d31'
@@ -265,16 +279,17 @@ def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
                 f'dwell_s:={route.dwell_s}', f'mode:={route.mode}',
                 f'speed_m_s:={route.speed_m_s}',
                 f'head_mount_pitch_deg:={MOUNT_PITCH_DEG}',
-                *([route_stops_parameter(route)] if custom_route else [])]) as sim, \
+                *([route_stops_parameter(route)] if custom_route else [])],
+                namespace) as sim, \
                 node_process('camera_driver_node', out / 'camera_driver.log', [
                     f'port:={link}', f'zoom_control:={str(zoom_control).lower()}',
                     # Stops are far apart: look for the next card soon and briskly.
                     'search_after_s:=1.0', 'search_speed_deg_s:=30.0',
                     f'search_tilt_levels_deg:=[{SEARCH_TILT_DEG}]',
-                    *driver_parameters]) as driver, \
+                    *driver_parameters], namespace) as driver, \
                 node_process('locator_node', out / 'locator.log', [
                     f'estimator:={estimator}',
-                    f'head.mount_pitch_deg:={MOUNT_PITCH_DEG}']) as locator:
+                    f'head.mount_pitch_deg:={MOUNT_PITCH_DEG}'], namespace) as locator:
             at_last_stop = None
             deadline = time.monotonic() + timeout_s
             while time.monotonic() < deadline:

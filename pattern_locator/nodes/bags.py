@@ -29,7 +29,7 @@ from pathlib import Path
 import shutil
 import sys
 import time
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from rosbags.interfaces import QosDurability, QosReliability
@@ -75,6 +75,8 @@ HEADING_SPREAD_DEG = 25.0
 TEST_BAG_OPTIONS = {'rate_hz': 5.0, 'jpeg': True}
 
 PLAYER_DEPTH = 100
+# After the player saw its subscribers, the time it leaves them to see it.
+MATCH_GRACE_S = 0.3
 _TYPESTORE = None
 
 
@@ -310,28 +312,93 @@ def _qos(connections):
     return qos
 
 
+def parse_remaps(remaps: Sequence[str]) -> Dict[str, str]:
+    """Return {bag topic: published topic} from ``FROM:=TO`` strings; ConfigError if bad."""
+    out = {}
+    for item in remaps:
+        source, sep, target = str(item).partition(':=')
+        if not sep or not source or not target:
+            raise ConfigError(f'bag play: a remap is FROM:=TO, got {item!r}')
+        out['/' + source.lstrip('/')] = '/' + target.lstrip('/')
+    return out
+
+
+class _Clock:
+    """Publish the bag's time on /clock at ``hz`` while playing (``--clock``)."""
+
+    def __init__(self, node, hz: float) -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        self._msg = Clock()
+        self._period = 1.0 / hz
+        self._last = -math.inf
+        # What rclcpp's ClockQoS offers: best effort, the newest only.
+        self._pub = node.create_publisher(
+            Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+    def publish(self, bag_ns: int, force: bool = False) -> None:
+        now = time.monotonic()
+        if force or now - self._last >= self._period:
+            self._msg.clock.sec, self._msg.clock.nanosec = divmod(int(bag_ns), 10 ** 9)
+            self._pub.publish(self._msg)
+            self._last = now
+
+    def sleep_until(self, due: float, bag_ns_at: Callable[[float], int]) -> None:
+        """Sleep until ``due`` (monotonic), publishing the bag time meanwhile."""
+        while True:
+            now = time.monotonic()
+            if now >= due:
+                return
+            time.sleep(min(due - now, max(0.0, self._last + self._period - now) or
+                           self._period))
+            self.publish(bag_ns_at(time.monotonic()))
+
+
 def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
          topics: Optional[Sequence[str]] = None, wait_acked_s: float = 10.0,
-         wait_for_subscribers: Sequence[str] = (), discovery_timeout_s: float = 10.0,
-         remap: Optional[Mapping[str, str]] = None) -> int:
+         wait_for_subscribers: Optional[Sequence[str]] = None,
+         discovery_timeout_s: float = 10.0, remap: Optional[Mapping[str, str]] = None,
+         clock_hz: float = 0.0, loops: int = 1, start_offset_s: float = 0.0,
+         delay_s: float = 0.0, match_grace_s: float = MATCH_GRACE_S,
+         progress: Optional[bool] = False) -> int:
     """
     Publish a bag's messages with the recorded timing; return how many were published.
 
-    ``rate``: playback speed (2.0 = twice as fast). ``topics``: play only
-    these (default: all). ``remap``: bag topic -> published topic.
-    ``wait_for_subscribers``: published topics that must have a subscriber
-    before playing starts (ConfigError after ``discovery_timeout_s``). Before
-    returning, waits up to ``wait_acked_s`` for every reliable subscriber to
-    acknowledge everything. Messages are published as recorded (serialized,
-    headers untouched); no /clock. Runs its own node in ``context`` (a new
-    one, shut down at the end, when None).
+    Like ``ros2 bag play``: ``rate`` is the speed factor (2.0 = twice as
+    fast); ``topics`` plays only these (default: all); ``remap`` maps a bag
+    topic to the topic it is published on; ``wait_for_subscribers`` lists
+    published topics that must have a subscriber before anything is
+    published (an empty list: every played topic; ConfigError after
+    ``discovery_timeout_s``), and then ``match_grace_s`` lets the
+    subscribers' side of the match complete (a best-effort subscription, as
+    camera images have, drops what arrives before it matched the player);
+    ``clock_hz`` > 0 publishes the bag time on ``/clock`` at that rate (and
+    with each message); ``loops`` plays the bag that many times (0: until
+    interrupted); ``start_offset_s`` skips the bag's first seconds;
+    ``delay_s`` waits before each pass; ``progress`` shows a progress line
+    on stderr (None: only when it is a terminal). Messages are published as
+    recorded (serialized, headers untouched). Before returning, waits up to
+    ``wait_acked_s`` for every reliable subscriber to acknowledge everything.
+    Runs its own node in ``context`` (a new one, shut down at the end, when
+    None).
     """
     import rclpy
     from rclpy.duration import Duration
     from rclpy.serialization import deserialize_message
 
-    if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0.0):
-        raise ConfigError(f'bag play: rate must be a positive number, got {rate!r}')
+    def positive(name, value, allow_zero=False):
+        ok = isinstance(value, (int, float)) and math.isfinite(value) and (
+            value >= 0.0 if allow_zero else value > 0.0)
+        if not ok:
+            kind = 'non-negative' if allow_zero else 'positive'
+            raise ConfigError(f'bag play: {name} must be a {kind} number, got {value!r}')
+
+    positive('rate', rate)
+    for name, value in (('clock', clock_hz), ('start offset', start_offset_s),
+                        ('delay', delay_s)):
+        positive(name, value, allow_zero=True)
+    if not isinstance(loops, int) or loops < 0:
+        raise ConfigError(f'bag play: loops must be 0 (forever) or more, got {loops!r}')
     remap = dict(remap or {})
     reader = open_bag(bag_dir)
     try:
@@ -343,6 +410,10 @@ def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
         if missing:
             raise ConfigError(f'{bag_dir}: no topic {", ".join(missing)} in the bag (it has '
                               f'{", ".join(sorted(by_topic)) or "none"})')
+        unknown_remaps = [t for t in remap if t not in by_topic]
+        if unknown_remaps:
+            raise ConfigError(f'bag play: cannot remap {", ".join(unknown_remaps)}: no such '
+                              'topic in the bag')
         classes = {}
         for topic in wanted:
             types = {c.msgtype for c in by_topic[topic]}
@@ -353,10 +424,15 @@ def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
             for c in by_topic[topic]:
                 _check_definition(topic, type_name, c.digest or '')
         out_topics = {topic: remap.get(topic, topic) for topic in wanted}
-        unknown = [t for t in wait_for_subscribers if t not in out_topics.values()]
+        waited = (list(out_topics.values()) if wait_for_subscribers is not None
+                  and not list(wait_for_subscribers) else list(wait_for_subscribers or ()))
+        unknown = [t for t in waited if t not in out_topics.values()]
         if unknown:
             raise ConfigError(f'bag play: cannot wait for subscribers of {", ".join(unknown)}: '
                               'not a topic being played')
+        connections = [c for topic in wanted for c in by_topic[topic]]
+        total = sum(c.msgcount for c in connections)
+        start_ns = reader.start_time + round(start_offset_s * 1e9)
 
         own_context = context is None
         if own_context:
@@ -364,39 +440,61 @@ def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
             rclpy.init(args=[], context=context)
         node = None
         published = 0
+        bar = None
         try:
             node = rclpy.create_node('pattern_locator_bag_player', context=context)
             publishers = {topic: node.create_publisher(classes[topic], out_topics[topic],
                                                        _qos(by_topic[topic]))
                           for topic in wanted}
+            clock = _Clock(node, clock_hz) if clock_hz > 0.0 else None
             by_out = {out_topics[t]: p for t, p in publishers.items()}
             deadline = time.monotonic() + discovery_timeout_s
-            for name in wait_for_subscribers:
+            for name in waited:
                 while by_out[name].get_subscription_count() == 0:
                     if time.monotonic() > deadline:
                         raise ConfigError(f'bag play: no subscriber on {name} after '
                                           f'{discovery_timeout_s:g} s')
                     time.sleep(0.02)
+            if waited and match_grace_s > 0.0:
+                time.sleep(match_grace_s)
+            if progress is not False:
+                from tqdm import tqdm
+                bar = tqdm(total=total * (loops or 1) if loops else None, unit='msg',
+                           desc=f'playing {Path(bag_dir).name}',
+                           disable=None if progress is None else False, leave=False)
             checked = set()
-            connections = [c for topic in wanted for c in by_topic[topic]]
-            start_wall = first_ns = None
-            for connection, stamp_ns, raw in reader.messages(connections=connections):
-                topic = connection.topic
-                if topic not in checked:
-                    try:
-                        deserialize_message(bytes(raw), classes[topic])
-                    except Exception as exc:  # noqa: B902 - any failure means a bad record
-                        raise ConfigError(f'{topic}: the recorded {connection.msgtype} does '
-                                          f'not deserialize ({exc})') from None
-                    checked.add(topic)
-                if start_wall is None:
-                    start_wall, first_ns = time.monotonic(), stamp_ns
-                due = start_wall + (stamp_ns - first_ns) * 1e-9 / rate
-                delay = due - time.monotonic()
-                if delay > 0.0:
-                    time.sleep(delay)
-                publishers[topic].publish(bytes(raw))
-                published += 1
+            done_loops = 0
+            while loops == 0 or done_loops < loops:
+                if delay_s > 0.0:
+                    time.sleep(delay_s)
+                start_wall = first_ns = None
+                for connection, stamp_ns, raw in reader.messages(connections=connections,
+                                                                 start=start_ns):
+                    topic = connection.topic
+                    if topic not in checked:
+                        try:
+                            deserialize_message(bytes(raw), classes[topic])
+                        except Exception as exc:  # noqa: B902 - any failure means a bad record
+                            raise ConfigError(f'{topic}: the recorded {connection.msgtype} '
+                                              f'does not deserialize ({exc})') from None
+                        checked.add(topic)
+                    if start_wall is None:
+                        start_wall, first_ns = time.monotonic(), stamp_ns
+                    due = start_wall + (stamp_ns - first_ns) * 1e-9 / rate
+                    if clock is not None:
+                        clock.sleep_until(due, lambda now: first_ns + round(
+                            (now - start_wall) * rate * 1e9))
+                        clock.publish(stamp_ns, force=True)
+                    else:
+                        delay = due - time.monotonic()
+                        if delay > 0.0:
+                            time.sleep(delay)
+                    publishers[topic].publish(bytes(raw))
+                    published += 1
+                    if bar is not None:
+                        bar.update(1)
+                        bar.set_postfix_str(f'bag time {stamp_ns * 1e-9:.3f} s', refresh=False)
+                done_loops += 1
             unacked = [out_topics[t] for t, p in publishers.items()
                        if not p.wait_for_all_acked(Duration(seconds=wait_acked_s))]
             if unacked:
@@ -404,6 +502,8 @@ def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
                     f'not every message was acknowledged within {wait_acked_s:g} s on: '
                     + ', '.join(unacked))
         finally:
+            if bar is not None:
+                bar.close()
             if node is not None:
                 node.destroy_node()
             if own_context:
@@ -444,6 +544,7 @@ def record_sim_main(out: Union[str, Path], **opts) -> int:
 def play_main(bag: Union[str, Path], rate: float = 1.0, **opts) -> int:
     """Play a bag into the ROS graph and print how many messages went out; return 0."""
     started = time.monotonic()
+    opts.setdefault('progress', None)
     count = play(bag, rate=rate, **opts)
     print(f'{bag}: published {count} messages in {time.monotonic() - started:.1f} s')
     return 0

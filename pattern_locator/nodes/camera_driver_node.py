@@ -2,58 +2,153 @@
 The ``camera_driver`` node: the Sony EVI-D31 over VISCA, and the tracking loop.
 
 Talks VISCA over a serial port (``port``, 9600 8N1) through
-``visca_camera.EviD31`` (Address Set, IF_Clear, power and initialisation at
+``visca.camera.EviD31`` (Address Set, IF_Clear, power and initialisation at
 start; every error reply handled; reconnects when the port vanishes). One
-thread runs ``head_loop.HeadLoop`` at ``rate_hz``: a position inquiry per
-cycle, the tracking controller (``tracking``), and a Drive only when the
-decision changes.
+thread runs ``tracking.head_loop.HeadLoop`` at ``rate_hz``: a position
+inquiry per cycle, the tracking controller (``tracking``), and a Drive only
+when the decision changes. A port that does not exist or cannot be opened
+is reported at once in one line and retried with backoff; the node runs
+(parameters, diagnostics) meanwhile.
+
+Topic names are relative (a namespace moves them); ``/diagnostics`` is absolute.
 
 Subscribes
-    /pattern_locator/target (geometry_msgs/PointStamped): x, y = pan and
-    tilt turns (radians, REP 103) that centre the card in the image stamped
-    in the header, z = its size in pixels.
+    ``pattern_locator/target`` (geometry_msgs/PointStamped): the card centre
+    in ``camera_optical_frame`` (metres) in the image stamped in the header;
+    the node turns it into the pan and tilt turns that centre it and, with
+    the camera_info of that time, the card's apparent size for the zoom.
+    ``camera/camera_info`` (sensor-data QoS) when the node does not publish
+    it itself.
 
 Publishes
-    /camera/joint_states (sensor_msgs/JointState): ``camera_pan`` and
-    ``camera_tilt`` in radians with REP 103 signs (pan positive = left,
-    tilt positive = up; the camera's own VISCA pan is positive right), and
-    ``camera_zoom`` in camera units (0 wide .. 1023 tele); stamped when the
-    position answer left the camera (arrival minus its wire time).
-    /camera/camera_info for the current zoom when ``zoom_table`` is set.
-    /diagnostics: connection, error counts, sockets, tracking mode.
+    ``camera/joint_states`` (sensor_msgs/JointState, reliable, depth 10):
+    ``camera_pan`` and ``camera_tilt`` in radians with REP 103 signs (pan
+    positive = left, tilt positive = up; the camera's own VISCA pan is
+    positive right), and ``camera_zoom`` in camera units (0 wide .. 1023
+    tele); stamped when the position answer left the camera.
+    ``camera/camera_info`` for the current zoom when ``zoom_table`` is set.
+    ``/diagnostics``: OK only while fresh positions flow; WARN while
+    starting or when answers stop for a moment, ERROR when the camera is
+    gone or positions stopped for long.
 
-Services (std_srvs/Trigger): ~/home, ~/reset.
+Services (std_srvs/Trigger): ``~/home``, ``~/reset``.
+
+Parameters: :data:`PARAMETERS`; the tracking settings, the rate and the
+zoom inquiry period apply at run time (validated: a refused change says
+why), the port and the names are read-only.
 """
 
+import collections
 import math
+import os
 import threading
 import time
+from typing import Any, Dict, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import CameraInfo, JointState
 from std_srvs.srv import Trigger
 
-from .image_codec import fill_camera_info
-from .ros_helpers import (declare_integer, declare_number, declare_value, parameter_values,
-                          run_node, stamp_seconds)
-from ..errors import PatternLocatorError
+from .image_codec import camera_from_info, fill_camera_info
+from .ros_helpers import (all_finite, describe_values, head_motion_to_point, Param, Parameters,
+                          ProblemLog, quote, run_node, stamp_key, stamp_seconds, wall_timer)
+from ..card.pattern import load_pattern_config
+from ..errors import ConfigError, PatternLocatorError
 from ..tracking.controller import TrackingController, TrackingParams
 from ..tracking.head_loop import HeadLoop, HeadReading
 from ..visca.camera import EviD31
 from ..visca.protocol import ViscaError
 from ..visca.zoom_table import ZoomTable
 
-PARAMETERS = (
-    'port', 'baud', 'address', 'rate_hz', 'startup_timeout_s', 'tracking', 'gain',
-    'dead_band_deg', 'max_pan_speed_deg_s', 'max_tilt_speed_deg_s', 'pan_limits_deg',
+THROTTLE_S = 5.0
+CAMERA_INFO_HISTORY = 60
+# Positions older than this many control periods (and at least FRESH_MIN_S)
+# are not fresh: diagnostics WARN; after STALE_ERROR_S without one, ERROR.
+FRESH_PERIODS = 3.0
+FRESH_MIN_S = 0.5
+STALE_ERROR_S = 5.0
+BACKOFF_MAX_S = 5.0
+
+TRACKING_PARAMETERS = (
+    'gain', 'dead_band_deg', 'max_pan_speed_deg_s', 'max_tilt_speed_deg_s', 'pan_limits_deg',
     'tilt_limits_deg', 'target_timeout_s', 'search', 'search_ahead_first', 'search_after_s',
-    'search_speed_deg_s',
-    'search_tilt_levels_deg', 'zoom_control', 'target_size_px', 'zoom_table', 'zoom_every',
-    'pan_joint', 'tilt_joint', 'zoom_joint', 'camera_frame')
+    'search_speed_deg_s', 'search_tilt_levels_deg', 'zoom_control', 'target_size_px',
+    'rate_hz')
+
+PARAMETERS: Tuple[Param, ...] = (
+    Param('port', '/dev/ttyUSB0', 'serial port of the camera'),
+    Param('baud', 9600, 'serial speed (the EVI-D31 talks 9600)', 1200, 115200),
+    Param('address', 1, 'VISCA address of the camera', 1, 7),
+    Param('rate_hz', 10.0, 'control cycles (position inquiries, joint states, commands) per '
+          'second', 1.0, 30.0, dynamic=True),
+    Param('startup_timeout_s', 15.0, 'give up one start-up attempt after this (then retry)',
+          1.0, 120.0, dynamic=True),
+    Param('tracking', True, 'keep pattern_locator/target centred', dynamic=True),
+    Param('gain', 3.0, 'speed = card rate + gain * angular error (1/s)', 0.1, 20.0,
+          dynamic=True),
+    Param('dead_band_deg', 0.3, 'no correction inside this error', 0.0, 10.0, dynamic=True),
+    Param('max_pan_speed_deg_s', 80.0, 'pan speed limit', 3.4, 80.0, dynamic=True),
+    Param('max_tilt_speed_deg_s', 50.0, 'tilt speed limit', 2.5, 50.0, dynamic=True),
+    Param('pan_limits_deg', [-100.0, 100.0], 'pan travel used (REP 103: + = left)',
+          dynamic=True),
+    Param('tilt_limits_deg', [-25.0, 25.0], 'tilt travel used (+ = up)', dynamic=True),
+    Param('target_timeout_s', 0.5, 'stop the head when no target image is newer than this',
+          0.05, 10.0, dynamic=True),
+    Param('search', True, 'sweep to search when no card was seen', dynamic=True),
+    Param('search_ahead_first', True, 'a head turned aside sweeps back through straight '
+          'ahead first (where the robot goes)', dynamic=True),
+    Param('search_after_s', 3.0, 'start the sweep after this long without a target', 0.5,
+          600.0, dynamic=True),
+    Param('search_speed_deg_s', 20.0, 'pan speed of the sweep', 3.4, 80.0, dynamic=True),
+    Param('search_tilt_levels_deg', [0.0, 15.0], 'tilt of successive sweep passes',
+          dynamic=True),
+    Param('zoom_control', False, 'zoom to keep the card at target_size_px', dynamic=True),
+    Param('target_size_px', 120.0, "the card's outer ring semi-axis to zoom to", 10.0, 1000.0,
+          dynamic=True),
+    Param('zoom_table', '', 'zoom -> intrinsics YAML; set to publish camera/camera_info '
+          '(empty: do not publish)'),
+    Param('zoom_every', 5, 'cycles between zoom inquiries', 1, 100, dynamic=True),
+    Param('pan_joint', 'camera_pan', 'joint name of the pan axis'),
+    Param('tilt_joint', 'camera_tilt', 'joint name of the tilt axis'),
+    Param('zoom_joint', 'camera_zoom', 'joint name of the zoom (camera units)'),
+    Param('camera_frame', 'camera_optical_frame', 'frame of camera_info'),
+    Param('pattern_config', '', "pattern YAML, for the card's size (empty: the shipped one)"),
+)
+
+
+def tracking_params(p: Dict[str, Any]) -> TrackingParams:
+    """Return the tracking settings of the node's parameter values; ConfigError if bad."""
+    def limits(name):
+        try:
+            values = [math.radians(float(v)) for v in p[name]]
+        except (TypeError, ValueError):
+            values = []
+        if len(values) != 2:
+            raise ConfigError(f'{name} needs two values [min, max], got {quote(p[name])}')
+        return tuple(values)
+
+    return TrackingParams(
+        gain=p['gain'], dead_band_rad=math.radians(p['dead_band_deg']),
+        resume_band_rad=2.0 * math.radians(p['dead_band_deg']),
+        max_pan_speed=math.radians(p['max_pan_speed_deg_s']),
+        max_tilt_speed=math.radians(p['max_tilt_speed_deg_s']),
+        control_period_s=1.0 / p['rate_hz'], pan_limits_rad=limits('pan_limits_deg'),
+        tilt_limits_rad=limits('tilt_limits_deg'), target_timeout_s=p['target_timeout_s'],
+        search_enabled=p['search'], search_ahead_first=p['search_ahead_first'],
+        search_after_s=p['search_after_s'],
+        search_pan_speed=math.radians(p['search_speed_deg_s']),
+        search_tilt_levels_rad=tuple(math.radians(float(v))
+                                     for v in p['search_tilt_levels_deg']),
+        zoom_enabled=p['zoom_control'], target_size_px=p['target_size_px'])
+
+
+def _is_device_path(port: str) -> bool:
+    """Return whether ``port`` names a file (not a pyserial URL such as loop://)."""
+    return '://' not in port
 
 
 class CameraDriverNode(Node):
@@ -61,105 +156,127 @@ class CameraDriverNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('camera_driver', **kwargs)
-        self._declare_parameters()
-        p = parameter_values(self, PARAMETERS)
+        self.parameters = Parameters(self, PARAMETERS)
+        p = self.parameters.values()
         self.params = p
-        self.get_logger().info('camera_driver configuration: ' + ', '.join(
-            f'{k}={v}' for k, v in sorted(p.items())))
+        self.parameters.check_all(self._validate)
+        self.get_logger().info('camera_driver configuration: ' + describe_values(p))
         self.zoom_table = ZoomTable.load(p['zoom_table']) if p['zoom_table'] else None
-        controller = TrackingController(self._tracking_params(p)) if p['tracking'] else None
+        self.card_radius_m = float(load_pattern_config(p['pattern_config'] or None)
+                                   .ring_radii[0])
+        controller = TrackingController(tracking_params(p)) if p['tracking'] else None
         self.camera = EviD31(p['port'], baud=p['baud'], address=p['address'])
         self.loop = HeadLoop(self.camera, controller, clock=self._now_s,
                              zoom_every=p['zoom_every'])
-        self.pub_joints = self.create_publisher(JointState, '/camera/joint_states',
-                                                qos_profile_sensor_data)
-        self.pub_info = (self.create_publisher(CameraInfo, '/camera/camera_info',
-                                               qos_profile_sensor_data)
-                         if self.zoom_table is not None else None)
+        self.problems = ProblemLog(self.get_logger(), THROTTLE_S)
+        # Changes for the camera thread, applied between two cycles.
+        self._pending: Dict[str, Any] = {}
+        self._tracking_on = bool(p['tracking'])
+        self._pending_lock = threading.Lock()
+        self._focal_by_stamp: 'collections.OrderedDict[int, float]' = collections.OrderedDict()
+        self._focal: Optional[float] = None
+        self.pub_joints = self.create_publisher(JointState, 'camera/joint_states',
+                                                QoSProfile(depth=10))
+        if self.zoom_table is not None:
+            self.pub_info = self.create_publisher(CameraInfo, 'camera/camera_info',
+                                                  qos_profile_sensor_data)
+        else:
+            self.pub_info = None
+            self.create_subscription(CameraInfo, 'camera/camera_info', self._on_camera_info,
+                                     qos_profile_sensor_data)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(PointStamped, '/pattern_locator/target', self._on_target, 10)
+        self.create_subscription(PointStamped, 'pattern_locator/target', self._on_target, 10)
         self.create_service(Trigger, '~/home', lambda req, res: self._trigger('home', res))
         self.create_service(Trigger, '~/reset', lambda req, res: self._trigger('reset', res))
-        self.create_timer(1.0, self._publish_diagnostics)
+        wall_timer(self, 1.0, self._publish_diagnostics)
+        self.parameters.on_change(self._validate, self._apply)
         self.readings = 0
+        self.targets = 0
+        self._last_reading_at: Optional[float] = None
+        self._started_at = time.monotonic()
         self._state = 'starting'
+        self._failing = False
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name='camera-driver', daemon=True)
         self._thread.start()
 
     # Parameters ---------------------------------------------------------------------
 
-    def _declare_parameters(self) -> None:
-        declare_value(self, 'port', '/dev/ttyUSB0', 'serial port of the camera')
-        declare_integer(self, 'baud', 9600, 'serial speed (the EVI-D31 talks 9600)',
-                        1200, 115200)
-        declare_integer(self, 'address', 1, 'VISCA address of the camera', 1, 7)
-        declare_number(self, 'rate_hz', 10.0, 'control cycles (position inquiries, joint '
-                       'states, commands) per second', 1.0, 30.0)
-        declare_number(self, 'startup_timeout_s', 15.0, 'give up one start-up attempt after '
-                       'this (then retry)', 1.0, 120.0)
-        declare_value(self, 'tracking', True, 'keep /pattern_locator/target centred')
-        declare_number(self, 'gain', 3.0, 'speed = gain * angular error (1/s)', 0.1, 20.0)
-        declare_number(self, 'dead_band_deg', 0.3, 'no correction inside this error', 0.0, 10.0)
-        declare_number(self, 'max_pan_speed_deg_s', 80.0, 'pan speed limit', 3.4, 80.0)
-        declare_number(self, 'max_tilt_speed_deg_s', 50.0, 'tilt speed limit', 2.5, 50.0)
-        declare_value(self, 'pan_limits_deg', [-100.0, 100.0], 'pan travel used (REP 103)')
-        declare_value(self, 'tilt_limits_deg', [-25.0, 25.0], 'tilt travel used')
-        declare_number(self, 'target_timeout_s', 0.5, 'stop the head when no target image is '
-                       'newer than this', 0.05, 10.0)
-        declare_value(self, 'search', True, 'sweep to search when no card was seen')
-        declare_value(self, 'search_ahead_first', True, 'a head turned aside sweeps back '
-                      'through straight ahead first (where the robot goes)')
-        declare_number(self, 'search_after_s', 3.0, 'start the sweep after this long without '
-                       'a target', 0.5, 600.0)
-        declare_number(self, 'search_speed_deg_s', 20.0, 'pan speed of the sweep', 3.4, 80.0)
-        declare_value(self, 'search_tilt_levels_deg', [0.0, 15.0],
-                      'tilt of successive sweep passes')
-        declare_value(self, 'zoom_control', False, 'zoom to keep the card at target_size_px')
-        declare_number(self, 'target_size_px', 120.0, "the card's outer ring semi-axis to zoom "
-                       'to', 10.0, 1000.0)
-        declare_value(self, 'zoom_table', '', 'zoom -> intrinsics YAML; set to publish '
-                      '/camera/camera_info (empty: do not publish)')
-        declare_integer(self, 'zoom_every', 5, 'cycles between zoom inquiries', 1, 100)
-        declare_value(self, 'pan_joint', 'camera_pan', 'joint name of the pan axis')
-        declare_value(self, 'tilt_joint', 'camera_tilt', 'joint name of the tilt axis')
-        declare_value(self, 'zoom_joint', 'camera_zoom', 'joint name of the zoom (camera units)')
-        declare_value(self, 'camera_frame', 'camera_optical_frame', 'frame of camera_info')
-
     @staticmethod
-    def _tracking_params(p) -> TrackingParams:
-        def limits(name):
-            values = [math.radians(float(v)) for v in p[name]]
-            if len(values) != 2:
-                raise PatternLocatorError(f'{name} needs two values [min, max], got {p[name]}')
-            return tuple(values)
+    def _validate(values: Dict[str, Any]) -> Optional[str]:
+        try:
+            tracking_params(values)
+        except ConfigError as exc:
+            return str(exc)
+        return None
 
-        return TrackingParams(
-            gain=p['gain'], dead_band_rad=math.radians(p['dead_band_deg']),
-            resume_band_rad=2.0 * math.radians(p['dead_band_deg']),
-            max_pan_speed=math.radians(p['max_pan_speed_deg_s']),
-            max_tilt_speed=math.radians(p['max_tilt_speed_deg_s']),
-            control_period_s=1.0 / p['rate_hz'], pan_limits_rad=limits('pan_limits_deg'),
-            tilt_limits_rad=limits('tilt_limits_deg'), target_timeout_s=p['target_timeout_s'],
-            search_enabled=p['search'], search_ahead_first=p['search_ahead_first'],
-            search_after_s=p['search_after_s'],
-            search_pan_speed=math.radians(p['search_speed_deg_s']),
-            search_tilt_levels_rad=tuple(math.radians(float(v))
-                                         for v in p['search_tilt_levels_deg']),
-            zoom_enabled=p['zoom_control'], target_size_px=p['target_size_px'])
+    def _apply(self, changed: Dict[str, Any]) -> None:
+        self.params = {**self.params, **changed}
+        # Targets stop reaching the controller at once; the camera thread
+        # swaps the controller and stops the head at its next cycle.
+        self._tracking_on = bool(self.params['tracking'])
+        with self._pending_lock:
+            self._pending.update(changed)
+
+    def _apply_pending(self) -> None:
+        """Apply parameter changes (camera thread, between cycles)."""
+        with self._pending_lock:
+            changed, self._pending = self._pending, {}
+        if not changed:
+            return
+        p = self.params
+        if 'zoom_every' in changed:
+            self.loop.zoom_every = max(1, int(p['zoom_every']))
+        if set(changed) & set(TRACKING_PARAMETERS + ('tracking',)):
+            # A new controller (its history is short: the next targets rebuild
+            # it), or none; either way the head stops first, since the last
+            # Drive would otherwise run on.
+            self.loop.controller = (TrackingController(tracking_params(p)) if p['tracking']
+                                    else None)
+            self.loop.reset_tracking()
+            try:
+                self.camera.stop()
+            except ViscaError as exc:
+                self.problems.report('camera', f'no stop after a tracking change: {exc}')
 
     # Callbacks ----------------------------------------------------------------------
 
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _on_target(self, msg: PointStamped) -> None:
-        values = (msg.point.x, msg.point.y, msg.point.z)
-        if not all(math.isfinite(v) for v in values):
-            self.get_logger().warning(f'ignored a target with non-finite values {values}',
-                                      throttle_duration_sec=5.0)
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = camera_from_info(msg)
+        except Exception as exc:  # noqa: B902 - any field of a foreign message can be wrong
+            self.problems.report('camera_info', f'bad camera_info: {exc}')
             return
-        self.loop.on_target(stamp_seconds(msg.header.stamp), *values)
+        self._remember_focal(stamp_key(msg.header.stamp), camera.fx)
+
+    def _remember_focal(self, key: int, fx: float) -> None:
+        if not (math.isfinite(fx) and fx > 0.0):
+            return
+        self._focal = fx
+        self._focal_by_stamp[key] = fx
+        while len(self._focal_by_stamp) > CAMERA_INFO_HISTORY:
+            self._focal_by_stamp.popitem(last=False)
+
+    def _on_target(self, msg: PointStamped) -> None:
+        if not self._tracking_on:
+            return
+        point = (msg.point.x, msg.point.y, msg.point.z)
+        if not all_finite(point) or point[2] <= 0.0:
+            self.problems.report('target', f'ignored a target that is not a point in front of '
+                                 f'the camera: {quote(point)}')
+            return
+        pan_error, tilt_error = head_motion_to_point(*point)
+        # The card's apparent size: its outer ring's radius over its distance,
+        # at the focal length of the image's time (a zoom camera's changes).
+        focal = self._focal_by_stamp.get(stamp_key(msg.header.stamp), self._focal)
+        size = None
+        if focal is not None:
+            size = focal * self.card_radius_m / math.sqrt(sum(v * v for v in point))
+        self.targets += 1
+        self.loop.on_target(stamp_seconds(msg.header.stamp), pan_error, tilt_error, size)
 
     def _trigger(self, action: str, response: Trigger.Response) -> Trigger.Response:
         if not self.camera.ready:
@@ -175,37 +292,46 @@ class CameraDriverNode(Node):
         # Outer loop (re)starts the camera, inner loop runs cycles; the
         # transport itself reopens a vanished port and re-runs the start-up.
         backoff = 0.5
+        port = self.params['port']
         while not self._stopping.is_set() and self.context.ok():
             try:
+                if _is_device_path(port) and not os.path.exists(port):
+                    raise _PortMissing(f'port {port} does not exist')
+                # Open first: a port that cannot be opened fails at once
+                # (start() would retry it for the whole start-up timeout).
+                self.camera.transport.open()
                 self._state = 'starting'
                 self.camera.start(timeout_s=self.params['startup_timeout_s'])
-                self.get_logger().info(f'camera on {self.params["port"]} ready')
+                self.get_logger().info(f'camera on {port} ready')
+                self._failing = False
                 backoff = 0.5
-            except ViscaError as exc:
+            except (ViscaError, _PortMissing) as exc:
+                if self._stopping.is_set():
+                    break
                 self._state = f'start-up failed: {exc}'
-                self.get_logger().error(f'camera start-up on {self.params["port"]} failed: '
-                                        f'{exc}; retrying in {backoff:.1f} s',
+                self._failing = True
+                self.get_logger().error(f'camera on {port}: {exc}; retrying in {backoff:.1f} s',
                                         throttle_duration_sec=10.0)
                 self._stopping.wait(backoff)
-                backoff = min(2 * backoff, 5.0)
+                backoff = min(2 * backoff, BACKOFF_MAX_S)
                 continue
             self._cycles()
-        self.camera.close()
+        self.camera.close(stop=self.camera.ready)
 
     def _cycles(self) -> None:
-        period = 1.0 / self.params['rate_hz']
         due = time.monotonic()
         was_ready = True
         while not self._stopping.is_set() and self.context.ok():
-            due += period
+            self._apply_pending()
+            due += 1.0 / self.params['rate_hz']
             ready = self.camera.ready
             if ready and not was_ready:
                 self.get_logger().info('camera back: tracking resumes')
                 self.loop.reset_tracking()
             if not ready:
                 if was_ready:
-                    self.get_logger().warning(f'camera lost: {self.camera.transport.last_error}'
-                                              ' (reconnecting)')
+                    self.get_logger().warning(
+                        f'camera lost: {self.camera.transport.last_error} (reconnecting)')
                 self._state = 'reconnecting'
             else:
                 self._state = 'ready'
@@ -214,7 +340,7 @@ class CameraDriverNode(Node):
                     try:
                         self._publish(reading)
                     except Exception:  # noqa: B902 - Ctrl-C invalidates the context under us
-                        if self.context.ok():
+                        if self.context.ok() and not self._stopping.is_set():
                             raise
                         return
             was_ready = ready
@@ -224,41 +350,76 @@ class CameraDriverNode(Node):
 
     def _publish(self, reading: HeadReading) -> None:
         p = self.params
+        values = (reading.pan, reading.tilt, reading.zoom_units)
+        if not all_finite(values + (reading.stamp_s,)):
+            self.problems.report('reading', f'head reading not finite: {values}')
+            return
         msg = JointState()
         msg.header.stamp = rclpy.time.Time(nanoseconds=int(reading.stamp_s * 1e9)).to_msg()
         msg.name = [p['pan_joint'], p['tilt_joint'], p['zoom_joint']]
-        msg.position = [float(reading.pan), float(reading.tilt), float(reading.zoom_units)]
+        msg.position = [float(v) for v in values]
         self.pub_joints.publish(msg)
         self.readings += 1
-        if self.pub_info is not None:
+        self._last_reading_at = time.monotonic()
+        if self.zoom_table is not None:
+            camera = self.zoom_table.camera_at(reading.zoom_units)
+            self._remember_focal(stamp_key(msg.header.stamp), camera.fx)
             info = CameraInfo()
-            fill_camera_info(info, self.zoom_table.camera_at(reading.zoom_units))
+            fill_camera_info(info, camera)
             info.header.stamp, info.header.frame_id = msg.header.stamp, p['camera_frame']
             self.pub_info.publish(info)
+
+    # Diagnostics ------------------------------------------------------------------------
+
+    def health(self) -> Tuple[int, str]:
+        """Return the diagnostics level and message: OK only while fresh positions flow."""
+        now = time.monotonic()
+        fresh_s = max(FRESH_MIN_S, FRESH_PERIODS / self.params['rate_hz'])
+        since = self._last_reading_at
+        age = None if since is None else now - since
+        if self._failing:
+            return DiagnosticStatus.ERROR, self._state
+        if age is not None and age <= fresh_s and self.camera.ready:
+            error = self.loop.last_error
+            return DiagnosticStatus.OK, 'positions flowing' + (
+                f'; last error: {error}' if error else '')
+        if age is None:
+            waited = now - self._started_at
+            level = (DiagnosticStatus.ERROR if waited > self.params['startup_timeout_s']
+                     else DiagnosticStatus.WARN)
+            return level, f'no position yet ({self._state}, {waited:.1f} s)'
+        level = DiagnosticStatus.ERROR if age > STALE_ERROR_S else DiagnosticStatus.WARN
+        why = self.loop.last_error or self.camera.transport.last_error or self._state
+        return level, f'no position for {age:.1f} s ({why})'
 
     def _publish_diagnostics(self) -> None:
         transport = self.camera.transport
         stats = transport.stats
         status = DiagnosticStatus()
         status.name = 'camera_driver: EVI-D31'
-        status.hardware_id = self.params['port']
-        ready = self.camera.ready
-        status.level = DiagnosticStatus.OK if ready else DiagnosticStatus.ERROR
-        status.message = self._state if not self.loop.last_error or not ready else \
-            f'ready; last error: {self.loop.last_error}'
+        status.hardware_id = str(self.params['port'])[:80]
+        status.level, status.message = self.health()
+        status.message = status.message[:200]
         loop = self.loop.stats()
+        age = (f'{time.monotonic() - self._last_reading_at:.2f}'
+               if self._last_reading_at is not None else 'n/a')
+        counts, _ = self.problems.snapshot()
         values = {
-            'connected': transport.connected, 'ready': ready,
+            'connected': transport.connected, 'ready': self.camera.ready,
+            'state': self._state[:200],
+            'position age s': age,
             'reconnects': stats.reconnects, 'connection losses': stats.connection_losses,
             'commands sent': stats.sent, 'replies': stats.replies, 'timeouts': stats.timeouts,
             'error replies': sum(stats.errors.values()),
             'errors by kind': ', '.join(f'{k}={v}' for k, v in sorted(stats.errors.items())),
             'junk bytes': stats.junk_bytes, 'network changes': stats.network_changes,
             'sockets in use': ' '.join(str(s) for s in transport.sockets_in_use) or 'none',
-            'joint states published': self.readings, 'tracking mode': loop['mode'],
+            'joint states published': self.readings, 'targets received': self.targets,
+            'tracking mode': loop['mode'] if self.loop.controller is not None else 'off',
             'tracking commands': loop['commands sent'],
-            'last error': transport.last_error or loop['last error'],
+            'last error': (transport.last_error or loop['last error'])[:200],
         }
+        values.update({f'problems: {k}': v for k, v in sorted(counts.items())})
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
@@ -266,9 +427,18 @@ class CameraDriverNode(Node):
         self.pub_diag.publish(array)
 
     def stop(self) -> None:
-        """Stop the camera thread; the head is stopped and the port closed."""
+        """Stop the camera thread within a fraction of a second; the head is stopped."""
         self._stopping.set()
-        self._thread.join(timeout=5.0)
+        self._thread.join(timeout=0.3)
+        if self._thread.is_alive():
+            # Blocked on the camera (a start-up, an unanswered inquiry): closing
+            # the port fails every waiter at once.
+            self.camera.close(stop=False)
+            self._thread.join(timeout=1.0)
+
+
+class _PortMissing(PatternLocatorError):
+    """The configured serial port does not exist (yet)."""
 
 
 def main(args=None) -> None:

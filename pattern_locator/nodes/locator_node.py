@@ -1,66 +1,170 @@
 """
 The ``locator`` node: camera images in, the robot's place in the building out.
 
-Subscribes to ``/camera/image_raw`` (sensor_msgs/Image, sensor-data QoS),
-``/camera/camera_info`` (sensor_msgs/CameraInfo, kept current: a zoom
-camera's intrinsics change) and ``/camera/joint_states``
-(sensor_msgs/JointState, ``camera_pan``/``camera_tilt``; only when
-``use_joint_states`` is true, else the fixed angles are used).
+Topic names are relative, so a namespace (``__ns:=/robot2``, a launch
+file's ``namespace``) moves them all; ``/diagnostics`` stays absolute.
 
-Publishes ``/robot_location`` (geometry_msgs/PoseStamped: the base pose, the
-image's stamp, the room frame or ``building``), ``/robot_location/ids``
-(std_msgs/UInt16MultiArray: floor, room, pattern),
-``/robot_location/with_covariance`` (geometry_msgs/PoseWithCovarianceStamped),
-``/pattern_locator/target`` (geometry_msgs/PointStamped: pan and tilt to
-centre the card, its size in px), ``/pattern_locator/debug_image`` (only
-drawn while someone subscribes) and ``/diagnostics``. The node's settings are
-in ``config/locator.yaml``; each is declared with a description and a range.
+Subscribes
+    ``camera/image_raw`` (sensor_msgs/Image, sensor-data QoS),
+    ``camera/camera_info`` (sensor_msgs/CameraInfo, sensor-data QoS; kept by
+    stamp, so each image uses the intrinsics of its own stamp: a zoom
+    camera's change), ``camera/joint_states`` (sensor_msgs/JointState,
+    reliable: ``camera_pan``/``camera_tilt``, used while
+    ``use_joint_states`` is true, else the fixed angles).
+
+Publishes
+    ``robot_location`` (geometry_msgs/PoseStamped: the base pose, the image's
+    stamp, the room frame or ``building``), ``robot_location/ids``
+    (std_msgs/UInt16MultiArray: floor, room, pattern),
+    ``robot_location/with_covariance``
+    (geometry_msgs/PoseWithCovarianceStamped; transient local, depth 1, like
+    AMCL's ``amcl_pose``: a late subscriber gets the last fix),
+    ``pattern_locator/target`` (geometry_msgs/PointStamped: the centre of the
+    biggest card seen, in ``camera_optical_frame``, metres),
+    ``pattern_locator/debug_image`` (only drawn while someone subscribes) and
+    ``/diagnostics``.
+
+Parameters: see :data:`PARAMETERS` (``config/locator.yaml`` and
+``docs/ros.md``); those marked dynamic apply at run time, after a check
+that refuses a bad value with the reason; the others are read-only.
 
 Only the newest frame is processed: when the work is slower than the camera,
-older frames are dropped and counted, never queued. Bad input (an unknown
-encoding, a short buffer, a bad camera_info, a code not in the map) gives a
-throttled warning and a diagnostics entry, never a pose.
+older frames are dropped and counted, never queued. Bad input (an oversized
+frame, an unknown encoding, a short buffer, a bad camera_info or joint
+state, a code not in the map) gives a throttled warning (one line per kind
+of problem every few seconds, foreign strings quoted and cut) and a count
+by reason in the diagnostics, never a pose. Nothing non-finite is ever
+published, whatever the core returns.
 """
 
 import collections
 import math
 import threading
 import time
-from typing import Optional, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import MultiArrayDimension, UInt16MultiArray
 
 from .image_codec import camera_from_info, fill_msg, image_from_msg
-from .ros_helpers import fill_pose, parameter_values, run_node, stamp_seconds
+from .memory import HeapTrimmer
+from .ros_helpers import (all_finite, describe_values, fill_pose, Param, Parameters,
+                          ProblemLog, run_node, stamp_key, stamp_seconds, wall_timer)
 from ..card.pattern import load_pattern_config
 from ..errors import PatternLocatorError
 from ..localization.building import load_building
 from ..localization.head import angles_from_joint_state, HeadGeometry, JointStateBuffer
-from ..localization.localizer import FrameResult, RobotLocalizer
+from ..localization.localizer import FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotLocalizer
 from ..vision.camera import CameraModel
+from ..vision.locate import ESTIMATORS
 from ..vision.overlay import draw_overlay
 
 THROTTLE_S = 5.0
-
-
 CAMERA_INFO_HISTORY = 60
-PARAMETERS = (
-    'pattern_config', 'building_map', 'estimator', 'output_frame', 'fusion', 'base_frame',
-    'min_tilt_deg', 'max_reprojection_px', 'use_joint_states', 'fixed_pan_deg', 'fixed_tilt_deg',
-    'joint_state_max_age_s', 'joint_state_wait_s', 'opencv_threads', 'head.base_to_pan_xyz',
-    'head.pan_to_tilt_xyz', 'head.tilt_to_optical_xyz', 'head.mount_pitch_deg')
+# An image that overtook its own camera_info waits this long for it.
+CAMERA_INFO_WAIT_S = 0.05
+# A joint state this much older than the newest one means the clock went back
+# (a bag replayed again, a simulator restarted): the history starts afresh.
+CLOCK_JUMP_S = 1.0
+# No image message is allowed more bytes per pixel than this (rgba8 with
+# padding): a frame over it is refused before anything reads its data.
+MAX_BYTES_PER_PIXEL = 8
+# Frames above this many bytes leave big buffers behind: trim the heap when idle.
+LARGE_FRAME_BYTES = 4 * 1024 * 1024
+TIMES_KEPT = 200
+
+PARAMETERS: Tuple[Param, ...] = (
+    Param('pattern_config', '', 'pattern YAML (empty: the shipped config/pattern.yaml)'),
+    Param('building_map', '', 'building map YAML (empty: the shipped config/building.yaml)'),
+    Param('estimator', 'exact', 'pose estimator', choices=ESTIMATORS, dynamic=True),
+    Param('output_frame', 'room', 'frame of robot_location: the room of the card seen, or '
+          'the building frame', choices=OUTPUT_FRAMES, dynamic=True),
+    Param('fusion', 'biggest', "several cards in view: the biggest (the paper's rule) or "
+          'all fused', choices=FUSION_MODES, dynamic=True),
+    Param('base_frame', 'base_link', 'frame name of the robot base'),
+    Param('min_tilt_deg', 0.0, "reject views tilted less than this (the paper's rule: 25)",
+          0.0, 89.0, dynamic=True),
+    Param('max_reprojection_px', 1.5, 'reject poses with a larger RMS reprojection error',
+          0.01, 100.0, dynamic=True),
+    Param('use_joint_states', True, 'take the head angles from camera/joint_states (else the '
+          'fixed ones)', dynamic=True),
+    Param('fixed_pan_deg', 0.0, 'head pan when joint states are not used (+ = left)',
+          -180.0, 180.0, dynamic=True),
+    Param('fixed_tilt_deg', 0.0, 'head tilt when joint states are not used (+ = up)',
+          -90.0, 90.0, dynamic=True),
+    Param('joint_state_max_age_s', 0.5, 'an image later than the last joint state by more '
+          'than this has no head angles', 0.01, 10.0, dynamic=True),
+    Param('joint_state_wait_s', 0.05, 'wait this long for a joint state newer than the image '
+          'before using the newest one', 0.0, 1.0, dynamic=True),
+    Param('joint_state_warmup_s', 1.0, 'an image with no joint state history around it (at '
+          'start, after the clock went back) waits this long for one', 0.0, 10.0,
+          dynamic=True),
+    Param('max_image_pixels', 4_194_304, 'refuse larger frames before reading them '
+          '(width * height)', 1, 100_000_000, dynamic=True),
+    Param('opencv_threads', 1, 'threads OpenCV may use per frame (0: its default)', 0, 64,
+          dynamic=True),
+    Param('head.base_to_pan_xyz', [0.0, 0.0, 1.0], 'base_link to the pan joint (m)'),
+    Param('head.pan_to_tilt_xyz', [0.0, 0.0, 0.05], 'pan joint to the tilt joint (m)'),
+    Param('head.tilt_to_optical_xyz', [0.03, 0.0, 0.05], 'tilt joint to the optical centre (m)'),
+    Param('head.mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this: tilt 0 '
+          'looks up by it (deg)', -60.0, 60.0),
+)
 
 
-def _stamp_key(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+def card_centre_from_homography(H: np.ndarray, camera: CameraModel) -> Optional[np.ndarray]:
+    """
+    Return a card centre's position in the optical frame (m) from its plane homography.
+
+    ``H`` maps the card plane (metres, centre at the origin) to undistorted
+    pixels: ``H ~ K [r1 r2 t]``, so ``t`` is ``K^-1 H``'s third column
+    scaled by the mean norm of the first two. None if it is degenerate.
+    """
+    try:
+        M = np.linalg.solve(camera.K, np.asarray(H, dtype=float))
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    if not (math.isfinite(scale) and scale > 0.0):
+        return None
+    t = M[:, 2] / scale
+    if t[2] < 0.0:
+        t = -t
+    return t if all_finite(t) and t[2] > 0.0 else None
+
+
+def rejection_reasons(result: FrameResult) -> Sequence[str]:
+    """
+    Return a short reason key per problem of a frame, for the diagnostics' counts.
+
+    The core's own reason keys when its result carries them (``reasons``);
+    otherwise the leading words of each problem (without the card's code
+    and any numbers), e.g. 'reprojection error', 'not in the building map'.
+    """
+    reasons = getattr(result, 'reasons', None)
+    if reasons:
+        return [str(r)[:40] for r in reasons]
+    keys = []
+    for text in result.problems:
+        if 'not in the building map' in str(text):
+            keys.append('not in the building map')
+            continue
+        head, _, rest = str(text).partition(': ')
+        if head.startswith('card ') and rest:
+            text = rest
+        words = []
+        for word in str(text).replace(':', ' : ').split():
+            if word == ':' or any(c.isdigit() for c in word) or word.startswith("'"):
+                break
+            words.append(word)
+        keys.append((' '.join(words[:5]) or 'other')[:40])
+    return keys
 
 
 class LocatorNode(Node):
@@ -68,232 +172,353 @@ class LocatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('locator', **kwargs)
-        self._declare_parameters()
-        p = self._params()
-        # One frame's work is small: OpenCV's own threads only contend with
-        # the node's and the camera pipeline's.
+        self.parameters = Parameters(self, PARAMETERS)
+        p = self.parameters.values()
+        self.get_logger().info('locator configuration: ' + describe_values(p))
         cv2.setNumThreads(int(p['opencv_threads']))
-        pattern = load_pattern_config(p['pattern_config'] or None)
-        building = load_building(p['building_map'] or None, pattern)
+        self.pattern = load_pattern_config(p['pattern_config'] or None)
+        building = load_building(p['building_map'] or None, self.pattern)
         self.head = HeadGeometry(
             base_to_pan_xyz=tuple(p['head.base_to_pan_xyz']),
             pan_to_tilt_xyz=tuple(p['head.pan_to_tilt_xyz']),
             tilt_to_optical_xyz=tuple(p['head.tilt_to_optical_xyz']),
             mount_pitch_rad=math.radians(p['head.mount_pitch_deg']))
         self.localizer = RobotLocalizer(
-            pattern, building, self.head, estimator=p['estimator'],
+            self.pattern, building, self.head, estimator=p['estimator'],
             output_frame=p['output_frame'], fusion=p['fusion'],
             min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'])
-        self.fixed_angles = (math.radians(p['fixed_pan_deg']), math.radians(p['fixed_tilt_deg']))
-        self.use_joint_states = p['use_joint_states']
         self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'])
-        self.joint_wait_s = p['joint_state_wait_s']
-        self._joint_arrived = threading.Condition()
-        self.get_logger().info('locator configuration: ' + ', '.join(
-            f'{k}={v}' for k, v in sorted(p.items())))
+        self.settings: Dict[str, Any] = dict(p)
+        # The worker holds this while it processes a frame; run-time
+        # parameter changes take it to change the localizer between frames.
+        self._settings_lock = threading.Lock()
+        self.parameters.on_change(self._validate, self._apply)
 
+        self.problems = ProblemLog(self.get_logger(), THROTTLE_S)
+        self.heap = HeapTrimmer()
         self.camera: Optional[CameraModel] = None
         # Recent intrinsics by stamp: a zooming camera's image is matched with
         # the camera_info of its own stamp, not with whatever came last.
-        self._cameras_by_stamp: 'collections.OrderedDict[int, CameraModel]' = \
+        self._cameras_by_stamp: 'collections.OrderedDict[int, Optional[CameraModel]]' = \
             collections.OrderedDict()
         self._camera_problem = 'no camera_info received yet'
-        self._latest: Optional[Image] = None
+        self._info_arrived = threading.Condition()
+        # Whether camera_info comes with the images' stamps (see _camera_for).
+        self._info_synchronised = False
+        self._joint_arrived = threading.Condition()
+        # The oldest joint state since the history (re)started: an image before
+        # it has no head angles yet and waits for the warm-up.
+        self._joint_first_stamp: Optional[float] = None
+        self._latest: Optional[Tuple[Image, float]] = None
         self._wake = threading.Condition()
         self._stopping = False
-        self._last_logged = {}
-        self._times = collections.deque(maxlen=100)
-        self._latest_arrival = 0.0
+        self._times: Dict[str, collections.deque] = {
+            k: collections.deque(maxlen=TIMES_KEPT)
+            for k in ('processing', 'joint_wait', 'queue', 'in_node')}
         self._stats_lock = threading.Lock()
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'located': 0,
-                      'rejected': 0, 'last_problem': ''}
+                      'refused_oversize': 0, 'clock_jumps': 0}
 
-        self.pub_pose = self.create_publisher(PoseStamped, '/robot_location', 10)
-        self.pub_ids = self.create_publisher(UInt16MultiArray, '/robot_location/ids', 10)
+        self.pub_pose = self.create_publisher(PoseStamped, 'robot_location', 10)
+        self.pub_ids = self.create_publisher(UInt16MultiArray, 'robot_location/ids', 10)
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_cov = self.create_publisher(PoseWithCovarianceStamped,
-                                             '/robot_location/with_covariance', 10)
-        self.pub_target = self.create_publisher(PointStamped, '/pattern_locator/target', 10)
-        self.pub_debug = self.create_publisher(Image, '/pattern_locator/debug_image', 1)
+                                             'robot_location/with_covariance', latched)
+        self.pub_target = self.create_publisher(PointStamped, 'pattern_locator/target', 10)
+        self.pub_debug = self.create_publisher(Image, 'pattern_locator/debug_image', 1)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Image, '/camera/image_raw', self._on_image,
+        self._image_sub = self._subscribe_images()
+        # The worker asks the executor thread to renew the image subscription.
+        self._renew_images = self.create_guard_condition(self._on_renew_images)
+        self.create_subscription(CameraInfo, 'camera/camera_info', self._on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(CameraInfo, '/camera/camera_info', self._on_camera_info,
-                                 qos_profile_sensor_data)
-        if self.use_joint_states:
-            self.create_subscription(JointState, '/camera/joint_states', self._on_joints,
-                                     qos_profile_sensor_data)
-        self.create_timer(1.0, self._publish_diagnostics)
+        # Joint states are reliable, as ROS publishes them (robot_state_publisher).
+        self.create_subscription(JointState, 'camera/joint_states', self._on_joints,
+                                 QoSProfile(depth=50))
+        wall_timer(self, 1.0, self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='locator-worker', daemon=True)
         self._worker.start()
 
+    def _subscribe_images(self) -> Any:
+        # Best effort, like the sensor-data profile, but only the newest frame:
+        # the node processes no other, and the reader keeps no backlog of
+        # large frames.
+        return self.create_subscription(
+            Image, 'camera/image_raw', self._on_image,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+
+    def _on_renew_images(self) -> None:
+        """
+        Give back what a burst of big frames left behind (executor thread, when idle).
+
+        The DDS reader keeps buffers as large as the largest frame it took;
+        a new reader starts small. Then the heap's free top goes back.
+        """
+        self.destroy_subscription(self._image_sub)
+        self._image_sub = self._subscribe_images()
+        self.heap.trim()
+        self.stats['renewals'] = self.stats.get('renewals', 0) + 1
+
     # Parameters ---------------------------------------------------------------
 
-    def _declare_parameters(self) -> None:
-        def number(name, value, description, low, high):
-            self.declare_parameter(name, value, ParameterDescriptor(
-                description=description,
-                floating_point_range=[FloatingPointRange(from_value=low, to_value=high)]))
+    @staticmethod
+    def _validate(values: Dict[str, Any]) -> Optional[str]:
+        # Ranges and choices are checked by Parameters; nothing depends on two
+        # parameters at once here.
+        return None
 
-        def text(name, value, description):
-            self.declare_parameter(name, value, ParameterDescriptor(description=description))
-
-        text('pattern_config', '', 'pattern YAML (empty: the shipped config/pattern.yaml)')
-        text('building_map', '', 'building map YAML (empty: the shipped config/building.yaml)')
-        text('estimator', 'exact', "pose estimator: 'exact' or 'paper'")
-        text('output_frame', 'room', "frame of /robot_location: 'room' or 'building'")
-        text('fusion', 'biggest', "several cards: 'biggest' (the paper's rule) or 'fused'")
-        text('base_frame', 'base_link', 'frame name of the robot base')
-        number('min_tilt_deg', 0.0, "reject views tilted less than this (the paper's rule: 25)",
-               0.0, 89.0)
-        number('max_reprojection_px', 1.5, 'reject poses with a larger RMS reprojection error',
-               0.01, 100.0)
-        self.declare_parameter('use_joint_states', True, ParameterDescriptor(
-            description='take the head angles from /camera/joint_states (else the fixed ones)'))
-        number('fixed_pan_deg', 0.0, 'head pan when joint states are not used (+ = left)',
-               -180.0, 180.0)
-        number('fixed_tilt_deg', 0.0, 'head tilt when joint states are not used (+ = up)',
-               -90.0, 90.0)
-        number('joint_state_max_age_s', 0.5, 'joint states older than this are stale',
-               0.0, 10.0)
-        number('joint_state_wait_s', 0.05, 'wait this long for a joint state newer than '
-               'the image before using the newest one', 0.0, 1.0)
-        number('head.mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this: tilt 0 '
-               'looks up by it (deg)', -60.0, 60.0)
-        self.declare_parameter('opencv_threads', 1, ParameterDescriptor(
-            description='threads OpenCV may use per frame (0: its default)',
-            integer_range=[IntegerRange(from_value=0, to_value=64, step=1)]))
-        for name, value, what in (
-                ('head.base_to_pan_xyz', [0.0, 0.0, 1.0], 'base_link to the pan joint (m)'),
-                ('head.pan_to_tilt_xyz', [0.0, 0.0, 0.05], 'pan joint to the tilt joint (m)'),
-                ('head.tilt_to_optical_xyz', [0.03, 0.0, 0.05],
-                 'tilt joint to the optical centre (m)')):
-            self.declare_parameter(name, value, ParameterDescriptor(description=what))
-
-    def _params(self) -> dict:
-        return parameter_values(self, PARAMETERS)
+    def _apply(self, changed: Dict[str, Any]) -> None:
+        with self._settings_lock:
+            self.settings.update(changed)
+            s = self.settings
+            locator = self.localizer.locator
+            locator.estimator = s['estimator']
+            locator.min_tilt_deg = float(s['min_tilt_deg'])
+            self.localizer.output_frame = s['output_frame']
+            self.localizer.fusion = s['fusion']
+            self.localizer.max_reprojection_px = float(s['max_reprojection_px'])
+            self.joints.max_age_s = float(s['joint_state_max_age_s'])
+            if 'estimator' in changed or 'output_frame' in changed:
+                # A fix from the other estimator or frame is no prior for the next.
+                self.localizer.last_fix = None
+            if 'opencv_threads' in changed:
+                cv2.setNumThreads(int(s['opencv_threads']))
 
     # Callbacks (executor thread: store only) ---------------------------------------
 
     def _on_image(self, msg: Image) -> None:
-        with self._wake:
+        with self._stats_lock:
             self.stats['received'] += 1
+        limit = int(self.settings['max_image_pixels'])
+        try:
+            pixels = int(msg.width) * int(msg.height)
+            size = len(msg.data)
+        except (TypeError, ValueError):
+            pixels, size = 0, 0
+        if pixels > limit or size > limit * MAX_BYTES_PER_PIXEL:
+            with self._stats_lock:
+                self.stats['refused_oversize'] += 1
+            self.problems.report('oversize image', f'image refused: {msg.width}x{msg.height}, '
+                                 f'{size} bytes, above max_image_pixels = {limit}')
+            return
+        with self._wake:
             if self._latest is not None:
-                self.stats['dropped'] += 1
-            self._latest = msg
-            self._latest_arrival = time.perf_counter()
+                with self._stats_lock:
+                    self.stats['dropped'] += 1
+            self._latest = (msg, time.perf_counter())
             self._wake.notify()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
+        key = stamp_key(msg.header.stamp)
         try:
-            self.camera = camera_from_info(msg)
-            self._camera_problem = ''
-            self._cameras_by_stamp[_stamp_key(msg.header.stamp)] = self.camera
+            camera = camera_from_info(msg)
+        except Exception as exc:  # noqa: B902 - any field of a foreign message can be wrong
+            detail = str(exc) if isinstance(exc, PatternLocatorError) else \
+                f'{type(exc).__name__}: {exc}'
+            self.camera = None
+            self._camera_problem = f'bad camera_info: {detail}'
+            self.problems.report('camera_info', self._camera_problem)
+            # The image of this stamp must not fall back on other intrinsics.
+            self._remember_camera(key, None)
+            return
+        self.camera = camera
+        self._camera_problem = ''
+        self._remember_camera(key, camera)
+
+    def _remember_camera(self, key: int, camera: Optional[CameraModel]) -> None:
+        with self._info_arrived:
+            self._cameras_by_stamp[key] = camera
             while len(self._cameras_by_stamp) > CAMERA_INFO_HISTORY:
                 self._cameras_by_stamp.popitem(last=False)
-        except PatternLocatorError as exc:
-            self.camera = None
-            self._camera_problem = f'bad camera_info: {exc}'
+            self._info_arrived.notify_all()
 
     def _on_joints(self, msg: JointState) -> None:
         try:
             pan, tilt = angles_from_joint_state(msg.name, msg.position)
+            stamp = stamp_seconds(msg.header.stamp)
+            latest = self.joints.latest()
+            if latest is not None and stamp < latest[0] - CLOCK_JUMP_S:
+                # The clock went back (a bag replayed again, a simulator reset).
+                self.joints.clear()
+                self._joint_first_stamp = None
+                with self._stats_lock:
+                    self.stats['clock_jumps'] += 1
+                self.get_logger().info(
+                    f'joint states went back {latest[0] - stamp:.1f} s in time (a replay, a '
+                    'restarted simulation): head angle history restarted',
+                    throttle_duration_sec=THROTTLE_S)
+            self.joints.add(stamp, pan, tilt)
+            if self._joint_first_stamp is None or stamp < self._joint_first_stamp:
+                self._joint_first_stamp = stamp
         except PatternLocatorError as exc:
-            self._problem(f'joint states: {exc}')
+            self.problems.report('joint_states', f'joint states: {exc}')
             return
-        stamp = stamp_seconds(msg.header.stamp)
-        latest = self.joints.latest()
-        if latest is not None and stamp < latest[0] - 1.0:
-            # Time went backwards (a bag replayed again, a simulator reset).
-            self.joints.clear()
-        self.joints.add(stamp, pan, tilt)
+        except Exception as exc:  # noqa: B902 - any field of a foreign message can be wrong
+            self.problems.report('joint_states', f'joint states: {type(exc).__name__}: {exc}')
+            return
         with self._joint_arrived:
             self._joint_arrived.notify_all()
 
     # Work (its own thread) ------------------------------------------------------------
 
     def _work(self) -> None:
+        large = False
         while True:
             with self._wake:
                 while self._latest is None and not self._stopping:
-                    self._wake.wait(0.5)
+                    if not self._wake.wait(0.5) and large:
+                        # Idle after big frames: give their buffers back.
+                        self._renew_images.trigger()
+                        large = False
                 if self._stopping:
                     return
-                msg, self._latest = self._latest, None
-                arrival = self._latest_arrival
+                (msg, arrival), self._latest = self._latest, None
+            large = large or len(msg.data) > LARGE_FRAME_BYTES
             try:
-                self._process(msg)
-                # Time from the image's arrival in this process to the end of
-                # its processing: the node's share of the latency.
-                self._times.append((time.perf_counter() - arrival) * 1000.0)
+                self._process(msg, arrival)
             except PatternLocatorError as exc:
-                self._problem(str(exc))
+                self.problems.report('image', str(exc))
             except Exception as exc:  # noqa: B902 - the node must outlive any one frame
                 if not self.context.ok():
                     return                   # Ctrl-C shut the context down mid-frame
-                self._problem(f'unexpected {type(exc).__name__}: {exc}')
+                self.problems.report('unexpected', f'unexpected {type(exc).__name__}: {exc}')
+            finally:
+                del msg
 
-    def _process(self, msg: Image) -> None:
+    def _process(self, msg: Image, arrival: float) -> None:
+        started = time.perf_counter()
         with self._stats_lock:
             self.stats['processed'] += 1
-        camera = self._cameras_by_stamp.get(_stamp_key(msg.header.stamp), self.camera)
+        self._times['queue'].append((started - arrival) * 1000.0)
+        camera = self._camera_for(stamp_key(msg.header.stamp))
+        if camera is False:
+            self.problems.report('camera_info', 'no location for an image whose own '
+                                 'camera_info was refused')
+            return
         if camera is None:
-            self._problem(self._camera_problem)
+            self.problems.report('camera_info', self._camera_problem)
             return
         if (camera.width, camera.height) != (msg.width, msg.height):
-            self._problem(f'camera_info is for {camera.width}x{camera.height} but the image is '
-                          f'{msg.width}x{msg.height}')
+            self.problems.report('image', f'camera_info is for {camera.width}x{camera.height} '
+                                 f'but the image is {msg.width}x{msg.height}')
             return
         image = image_from_msg(msg)          # a view of the message: the detector only reads
-        pan, tilt = self._head_angles(msg)
-        result = self.localizer.process(image, camera, pan, tilt)
-        for problem in result.problems:
-            self._problem(problem)
-        self._publish(msg, result, image, camera)
+        waited = time.perf_counter()
+        angles = self._head_angles(msg)
+        waited = time.perf_counter() - waited
+        self._times['joint_wait'].append(waited * 1000.0)
+        if angles is None:
+            return
+        with self._settings_lock:
+            result = self.localizer.process(image, camera, *angles)
+            self._publish(msg, result, image, camera)
+        for problem, reason in zip(result.problems, rejection_reasons(result)):
+            self.problems.report(f'rejected: {reason}', problem)
+        done = time.perf_counter()
+        # The node's own work, apart from the wait for a later joint state;
+        # and the whole stay of the image in the node (queue + wait + work).
+        self._times['processing'].append((done - started - waited) * 1000.0)
+        self._times['in_node'].append((done - arrival) * 1000.0)
 
-    def _head_angles(self, msg: Image) -> Tuple[float, float]:
-        if not self.use_joint_states:
-            return self.fixed_angles
+    def _camera_for(self, key: int):
+        """
+        Return the intrinsics of an image's stamp: its own, else the latest (None: none).
+
+        False when its own camera_info was refused. While camera_info comes
+        with the images' stamps (a driver publishing both), an image that
+        overtook its own camera_info waits a little for it: a zoom camera's
+        previous intrinsics would be wrong for it.
+        """
+        deadline = time.monotonic() + CAMERA_INFO_WAIT_S
+        with self._info_arrived:
+            while key not in self._cameras_by_stamp and self._info_synchronised:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0 or self._stopping:
+                    break
+                self._info_arrived.wait(remaining)
+        if key in self._cameras_by_stamp:
+            self._info_synchronised = True
+            camera = self._cameras_by_stamp[key]
+            return False if camera is None else camera
+        self._info_synchronised = False
+        return self.camera
+
+    def _head_angles(self, msg: Image) -> Optional[Tuple[float, float]]:
+        s = self.settings
+        if not s['use_joint_states']:
+            return math.radians(s['fixed_pan_deg']), math.radians(s['fixed_tilt_deg'])
         stamp = stamp_seconds(msg.header.stamp)
         # An image can overtake the joint state taken just after it: wait a
         # little for a sample on its far side rather than hold an old one.
-        deadline = time.monotonic() + self.joint_wait_s
+        # With no history around the image (at start; after the clock went
+        # back, before the new joint states came) wait longer: the first
+        # joint state is on its way (a replay publishes it first).
+        start = time.monotonic()
+        short = start + float(s['joint_state_wait_s'])
+        long = start + max(float(s['joint_state_warmup_s']), float(s['joint_state_wait_s']))
         with self._joint_arrived:
             while True:
                 latest = self.joints.latest()
-                remaining = deadline - time.monotonic()
-                if (latest is not None and latest[0] >= stamp) or remaining <= 0:
+                first = self._joint_first_stamp
+                covered = latest is not None and first is not None and first <= stamp
+                now = time.monotonic()
+                if covered and latest[0] >= stamp:
                     break
-                self._joint_arrived.wait(remaining)
-        return self.joints.at(stamp)
-
-    def _problem(self, text: str) -> None:
-        """Count and report a problem; each distinct message at most every few seconds."""
-        with self._stats_lock:
-            self.stats['rejected'] += 1
-            self.stats['last_problem'] = text
-            now = time.monotonic()
-            if len(self._last_logged) > 256:
-                self._last_logged.clear()
-            due = now - self._last_logged.get(text, -math.inf) >= THROTTLE_S
-            if due:
-                self._last_logged[text] = now
-        if due:
-            self.get_logger().warning(text)
+                if (covered and now >= short) or now >= long or self._stopping:
+                    break
+                if not covered and self._latest is not None:
+                    # A newer frame is waiting: it has better chances (a live
+                    # camera whose driver is not publishing yet).
+                    break
+                self._joint_arrived.wait((short if covered else long) - now)
+        try:
+            return self.joints.at(stamp)
+        except PatternLocatorError as exc:
+            self.problems.report('head angles', str(exc))
+            return None
 
     # Output ---------------------------------------------------------------------
+
+    def _target_point(self, result: FrameResult, camera: CameraModel
+                      ) -> Optional[np.ndarray]:
+        """Return the biggest card's centre in the optical frame (m), or None."""
+        if not result.detections:
+            return None
+        det = result.detections[0]
+        fix = result.fix
+        if fix is not None and fix.ids == det.ids and fix.size_px == det.size_px:
+            point = np.asarray(fix.T_camera_card.t, dtype=float)
+        else:
+            point = card_centre_from_homography(det.homography, camera)
+        if point is None or not all_finite(point) or point[2] <= 0.0:
+            return None
+        return point
 
     def _publish(self, msg: Image, result: FrameResult, image: np.ndarray,
                  camera: CameraModel) -> None:
         header = msg.header
-        if result.target is not None:
+        point = self._target_point(result, camera)
+        if point is not None:
             target = PointStamped()
-            target.header = header
-            target.point.x, target.point.y, target.point.z = (float(v) for v in result.target)
+            target.header.stamp = header.stamp
+            target.header.frame_id = header.frame_id or 'camera_optical_frame'
+            target.point.x, target.point.y, target.point.z = (float(v) for v in point)
             self.pub_target.publish(target)
+        elif result.detections:
+            self.problems.report('rejected: non-finite target',
+                                 'no target published: the card centre is not finite')
         if self.pub_debug.get_subscription_count() > 0:
             self._publish_debug(msg, result, image)
         fix = result.fix
         if fix is None:
+            return
+        covariance = np.asarray(fix.covariance, dtype=float)
+        ids = tuple(fix.ids.as_tuple())
+        problem = _unpublishable(fix, covariance, ids)
+        if problem:
+            self.problems.report(f'rejected: {problem}', f'fix not published: {problem}')
             return
         with self._stats_lock:
             self.stats['located'] += 1
@@ -304,12 +529,12 @@ class LocatorNode(Node):
         with_cov = PoseWithCovarianceStamped()
         with_cov.header = pose.header
         with_cov.pose.pose = pose.pose
-        with_cov.pose.covariance = [float(v) for v in np.asarray(fix.covariance).ravel()]
-        ids = UInt16MultiArray()
-        ids.layout.dim = [MultiArrayDimension(label=name, size=1, stride=1)
-                          for name in ('floor', 'room', 'pattern')]
-        ids.data = [int(v) for v in fix.ids.as_tuple()]
-        self.pub_ids.publish(ids)
+        with_cov.pose.covariance = [float(v) for v in covariance.ravel()]
+        ids_msg = UInt16MultiArray()
+        ids_msg.layout.dim = [MultiArrayDimension(label=name, size=1, stride=1)
+                              for name in ('floor', 'room', 'pattern')]
+        ids_msg.data = [int(v) for v in ids]
+        self.pub_ids.publish(ids_msg)
         self.pub_cov.publish(with_cov)
         self.pub_pose.publish(pose)
 
@@ -328,27 +553,62 @@ class LocatorNode(Node):
     def _publish_diagnostics(self) -> None:
         with self._stats_lock:
             s = dict(self.stats)
+        counts, last = self.problems.snapshot()
         status = DiagnosticStatus()
         status.name = 'pattern_locator: locator'
-        status.hardware_id = self.camera.name if self.camera else 'camera'
-        ok = self.camera is not None
+        camera = self.camera
+        status.hardware_id = camera.name[:80] if camera else 'camera'
+        ok = camera is not None
         status.level = DiagnosticStatus.OK if ok else DiagnosticStatus.WARN
-        status.message = 'running' if ok else self._camera_problem
-        times = sorted(self._times)
-        median = f'{times[len(times) // 2]:.2f}' if times else 'n/a'
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in s.items()] + [
-            KeyValue(key='estimator', value=self.localizer.locator.estimator),
-            KeyValue(key='frame_ms_median', value=median)]
+        status.message = 'running' if ok else self._camera_problem[:200]
+        values = dict(s)
+        values['rejected'] = sum(counts.values())
+        values['last_problem'] = last
+        values['estimator'] = self.localizer.locator.estimator
+        values['output_frame'] = self.localizer.output_frame
+        for name, series in self._times.items():
+            values.update(_timing(name, series))
+        values.update({f'problems: {k}': v for k, v in sorted(counts.items())})
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [status]
         self.pub_diag.publish(array)
 
     def stop(self) -> None:
+        """Stop the worker thread."""
         with self._wake:
             self._stopping = True
             self._wake.notify()
+        for condition in (self._joint_arrived, self._info_arrived):
+            with condition:
+                condition.notify_all()
         self._worker.join(timeout=2.0)
+
+
+def _timing(name: str, series: 'collections.deque') -> Dict[str, str]:
+    """Return median, p95 and max of a series of milliseconds, as diagnostics values."""
+    values = sorted(series)
+    if not values:
+        return {f'{name}_ms_median': 'n/a'}
+    return {f'{name}_ms_median': f'{values[len(values) // 2]:.2f}',
+            f'{name}_ms_p95': f'{values[min(len(values) - 1, int(0.95 * len(values)))]:.2f}',
+            f'{name}_ms_max': f'{values[-1]:.2f}'}
+
+
+def _unpublishable(fix: Any, covariance: np.ndarray, ids: Tuple[int, ...]) -> str:
+    """Return why a fix must not be published (the node's last guard), or ''."""
+    T = fix.T_frame_base
+    if not (all_finite(np.ravel(T.t)) and all_finite(np.ravel(T.R))):
+        return 'non-finite pose'
+    if covariance.shape != (6, 6) or not all_finite(covariance.ravel()):
+        return 'non-finite covariance'
+    if len(ids) != 3 or not all(isinstance(v, (int, np.integer)) and 0 <= v <= 65535
+                                for v in ids):
+        return 'ids out of range'
+    if not isinstance(fix.frame_id, str) or not fix.frame_id:
+        return 'no frame'
+    return ''
 
 
 def main(args=None) -> None:

@@ -9,25 +9,34 @@ with the ground truth. The emulated camera answers VISCA on a
 pseudo-terminal (``visca_emulator``): the real ``camera_driver`` opens the
 path in ``camera_link`` exactly like the robot's serial port.
 
+Topic names are relative (a namespace moves them all).
+
 Publishes
-    /camera/image_raw (sensor_msgs/Image, bgr8), /camera/camera_info,
-    /sim/true_pose (geometry_msgs/PoseStamped: base_link in the room frame),
-    /sim/true_camera_pose (PoseStamped: the optical frame in the room frame),
-    /sim/true_target (geometry_msgs/PointStamped: x, y = the exact pan and
-    tilt turns that centre the card in view nearest the optical axis, or the
-    route's current card when none is in view, REP 103 signs; z = its
-    number). All stamped with the image's stamp.
+    ``camera/image_raw`` (sensor_msgs/Image, bgr8, sensor-data QoS),
+    ``camera/camera_info`` (sensor-data QoS),
+    ``sim/true_pose`` (geometry_msgs/PoseStamped: base_link in the room frame),
+    ``sim/true_camera_pose`` (PoseStamped: the optical frame in the room frame),
+    ``sim/true_target`` (geometry_msgs/PointStamped: the centre of the card in
+    view nearest the optical axis, or of the route's current card when none
+    is in view, in ``camera_optical_frame``, metres: the convention of the
+    locator's ``pattern_locator/target``). All stamped with the image's stamp.
+
+Frames are rendered on the steady clock, so the sim runs with
+``use_sim_time`` too; stamps are the node's ROS time. ``frame_rate_hz``,
+``jpeg_quality`` and ``loop`` can be set at run time; the route and the
+camera are read-only.
 
 The route clock starts once the camera has been addressed and has finished
 its power-up, and someone subscribes to the images (``wait_for_camera``).
 """
 
+from dataclasses import replace
 import math
 import os
 from pathlib import Path
 import tempfile
 import time
-from typing import Optional
+from typing import Optional, Tuple
 
 from geometry_msgs.msg import PointStamped, PoseStamped
 from rclpy.node import Node
@@ -35,8 +44,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from .image_codec import fill_camera_info, fill_msg
-from .ros_helpers import (declare_integer, declare_number, declare_value, fill_pose,
-                          parameter_values, run_node)
+from .ros_helpers import describe_values, fill_pose, Param, Parameters, run_node, wall_timer
 from ..errors import PatternLocatorError
 from ..localization.head import HeadGeometry
 from ..sim.world import RouteStop, SimRoute, SimScene
@@ -44,10 +52,33 @@ from ..visca.emulator import EmulatedEviD31
 from ..visca.zoom_table import ZoomTable
 from ..vision.geometry import Pose
 
-PARAMETERS = ('floor', 'room', 'mode', 'dwell_s', 'speed_m_s', 'n_stops', 'seed',
-              'frame_rate_hz', 'camera_link', 'zoom_table', 'field_rate_hz', 'init_s',
-              'wait_for_camera', 'loop', 'camera_frame', 'jpeg_quality', 'head_mount_pitch_deg',
-              'route_stops')
+PARAMETERS: Tuple[Param, ...] = (
+    Param('floor', 1, 'floor of the simulated room', 0, 255),
+    Param('room', 3, 'room of the simulated route', 1, 255),
+    Param('mode', 'stops', "route: still at each stop (like the paper's images) or driving "
+          'between stops', choices=('stops', 'drive')),
+    Param('dwell_s', 2.5, 'time at each stop', 0.0, 600.0),
+    Param('speed_m_s', 0.3, 'driving speed between stops', 0.01, 3.0),
+    Param('n_stops', 30, 'stops of the paper route to drive', 1, 30),
+    Param('seed', 7, 'seed of the headings and the image noise', 0, 2 ** 31),
+    Param('frame_rate_hz', 10.0, 'camera frame rate', 0.5, 60.0, dynamic=True),
+    Param('camera_link', '', 'path of the emulated camera port (a symlink to its '
+          'pseudo-terminal; empty: a per-process temporary path)'),
+    Param('zoom_table', '', 'zoom -> intrinsics YAML (empty: the shipped '
+          'config/evi_d31_zoom.yaml)'),
+    Param('field_rate_hz', 50.0, 'video fields per second (PAL EVI-D31: 50)', 1.0, 120.0),
+    Param('init_s', 1.0, "the emulated camera's power-up initialisation", 0.0, 30.0),
+    Param('wait_for_camera', True, 'start the route once the camera is addressed and '
+          'initialised and the images have a subscriber'),
+    Param('loop', False, 'drive the route again after its end', dynamic=True),
+    Param('camera_frame', 'camera_optical_frame', 'frame of the images'),
+    Param('jpeg_quality', 0, 'pass the images through JPEG at this quality (0: off)', 0, 100,
+          dynamic=True),
+    Param('head_mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this on the tilt '
+          'link (the locator must be told the same)', -60.0, 60.0),
+    Param('route_stops', [0.0], 'a route of its own: x, y (m, room frame), heading (deg), '
+          'card, repeated; [0.0]: the paper route'),
+)
 
 
 def default_camera_link() -> str:
@@ -75,12 +106,13 @@ class SimNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('sim', **kwargs)
-        self._declare_parameters()
-        p = parameter_values(self, PARAMETERS)
-        self.scene = SimScene(floor=p['floor'], room=p['room'], head=HeadGeometry(
-            mount_pitch_rad=math.radians(p['head_mount_pitch_deg'])))
+        self.parameters = Parameters(self, PARAMETERS)
+        p = self.parameters.values()
         if (p['floor'], p['room']) != (1, 3):
             raise PatternLocatorError('sim: only the paper route (floor 1, room 3) is built in')
+        self.scene = SimScene(floor=p['floor'], room=p['room'], head=HeadGeometry(
+            mount_pitch_rad=math.radians(p['head_mount_pitch_deg'])))
+        self._set_jpeg(p['jpeg_quality'])
         self.route = route_from_parameters(p)
         self.zoom_table = ZoomTable.load(p['zoom_table'] or None)
         link = p['camera_link'] or default_camera_link()
@@ -92,47 +124,33 @@ class SimNode(Node):
         self._frame = 0
         self._route_start: Optional[float] = None
         self._finished = False
-        self.pub_image = self.create_publisher(Image, '/camera/image_raw',
+        self.pub_image = self.create_publisher(Image, 'camera/image_raw',
                                                qos_profile_sensor_data)
-        self.pub_info = self.create_publisher(CameraInfo, '/camera/camera_info',
+        self.pub_info = self.create_publisher(CameraInfo, 'camera/camera_info',
                                               qos_profile_sensor_data)
-        self.pub_true = self.create_publisher(PoseStamped, '/sim/true_pose', 10)
-        self.pub_true_camera = self.create_publisher(PoseStamped, '/sim/true_camera_pose', 10)
-        self.pub_true_target = self.create_publisher(PointStamped, '/sim/true_target', 10)
+        self.pub_true = self.create_publisher(PoseStamped, 'sim/true_pose', 10)
+        self.pub_true_camera = self.create_publisher(PoseStamped, 'sim/true_camera_pose', 10)
+        self.pub_true_target = self.create_publisher(PointStamped, 'sim/true_target', 10)
         self.get_logger().info(f'emulated EVI-D31 on {self.camera.port}')
-        self.get_logger().info('sim configuration: ' + ', '.join(
-            f'{k}={v}' for k, v in sorted(p.items())))
+        self.get_logger().info('sim configuration: ' + describe_values(p))
         self.get_logger().info(f'route: {len(self.route.stops)} stops in {self.room_frame}, '
                                f'{self.route.duration_s:.1f} s ({p["mode"]})')
-        self.create_timer(1.0 / p['frame_rate_hz'], self._tick)
+        # Frames come on the steady clock: the sim renders whatever the ROS
+        # time does (use_sim_time without a /clock); stamps are ROS time.
+        self._timer = wall_timer(self, 1.0 / p['frame_rate_hz'], self._tick)
+        self.parameters.on_change(lambda values: None, self._apply)
 
-    def _declare_parameters(self) -> None:
-        declare_integer(self, 'floor', 1, 'floor of the simulated room', 0, 255)
-        declare_integer(self, 'room', 3, 'room of the simulated route', 1, 255)
-        declare_value(self, 'mode', 'stops', "route: 'stops' (still at each stop, like the "
-                      "paper's images) or 'drive' (drives between stops)")
-        declare_number(self, 'dwell_s', 2.5, 'time at each stop', 0.0, 600.0)
-        declare_number(self, 'speed_m_s', 0.3, 'driving speed between stops', 0.01, 3.0)
-        declare_integer(self, 'n_stops', 30, 'stops of the paper route to drive', 1, 30)
-        declare_integer(self, 'seed', 7, 'seed of the headings and the image noise', 0, 2 ** 31)
-        declare_number(self, 'frame_rate_hz', 10.0, 'camera frame rate', 0.5, 60.0)
-        declare_value(self, 'camera_link', '', 'path of the emulated camera port (a symlink to '
-                      'its pseudo-terminal; empty: a per-process temporary path)')
-        declare_value(self, 'zoom_table', '', 'zoom -> intrinsics YAML (empty: the shipped '
-                      'config/evi_d31_zoom.yaml)')
-        declare_number(self, 'field_rate_hz', 50.0, 'video fields per second (PAL EVI-D31: 50)',
-                       1.0, 120.0)
-        declare_number(self, 'init_s', 1.0, "the emulated camera's power-up initialisation",
-                       0.0, 30.0)
-        declare_value(self, 'wait_for_camera', True, 'start the route once the camera is '
-                      'addressed and initialised and the images have a subscriber')
-        declare_value(self, 'loop', False, 'drive the route again after its end')
-        declare_value(self, 'camera_frame', 'camera_optical_frame', 'frame of the images')
-        declare_value(self, 'route_stops', [0.0], 'a route of its own: x, y (m, room frame), '
-                      'heading (deg), card, repeated; [0.0]: the paper route')
-        declare_number(self, 'head_mount_pitch_deg', 0.0, 'the camera is mounted pitched up by '
-                       'this on the tilt link (the locator must be told the same)', -60.0, 60.0)
-        declare_integer(self, 'jpeg_quality', 0, 'pass the images through JPEG (0: off)', 0, 100)
+    def _set_jpeg(self, quality: int) -> None:
+        self.scene.options = replace(self.scene.options,
+                                     jpeg_quality=int(quality) if quality else None)
+
+    def _apply(self, changed) -> None:
+        self.params = {**self.params, **changed}
+        if 'jpeg_quality' in changed:
+            self._set_jpeg(changed['jpeg_quality'])
+        if 'frame_rate_hz' in changed:
+            self.destroy_timer(self._timer)
+            self._timer = wall_timer(self, 1.0 / self.params['frame_rate_hz'], self._tick)
 
     def _route_time(self) -> Optional[float]:
         now = time.monotonic()
@@ -194,10 +212,11 @@ class SimNode(Node):
         card = min(in_view, key=lambda n: math.hypot(
             *self.scene.card_angles(T_room_base, pan, tilt, n))) if in_view \
             else self._current_card(t)
+        T_camera_room = self.scene.true_camera_pose(T_room_base, pan, tilt).inverse()
+        centre = T_camera_room.apply(self.scene.card(card).T_room_card.t[None])[0]
         target = PointStamped()
         target.header.stamp, target.header.frame_id = stamp, self.params['camera_frame']
-        target.point.x, target.point.y = self.scene.card_angles(T_room_base, pan, tilt, card)
-        target.point.z = float(card)
+        target.point.x, target.point.y, target.point.z = (float(v) for v in centre)
         self.pub_true_target.publish(target)
 
     def _current_card(self, t: Optional[float]) -> int:

@@ -2,23 +2,30 @@
 The locator node as a real process over DDS.
 
 An image of the shipped building's paper room is published with its
-camera_info; the node must answer with the base pose, the ids and the
-covariance, ignore malformed input, and shut down cleanly on Ctrl-C.
+camera_info; the node must answer with the base pose, the ids, the
+covariance (latched for late subscribers) and the card's centre as a point
+in the optical frame; apply parameter changes through ROS's parameter
+services (and refuse bad ones with the reason); and shut down cleanly on
+Ctrl-C. Malformed input: ``test_fuzz_node.py``.
 """
 
 import math
-import signal
 import subprocess
 import sys
 import time
 
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
 import numpy as np
 from pattern_locator.nodes.image_codec import fill_camera_info, fill_msg
 from pattern_locator.vision.camera import CameraModel
 import pytest
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_tools import client_node, locator_process, spin_until
-from scene_tools import base_pose, CAMERA, view
+from scene_tools import base_pose, BUILDING, CAMERA, view
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import UInt16MultiArray
 from test_image_codec import bayer_mosaic, packed, yuv422
@@ -41,15 +48,17 @@ def graph(locator):
 
 
 def _graph(node, executor):
-    received = {'pose': [], 'ids': [], 'cov': []}
-    node.create_subscription(PoseStamped, '/robot_location',
-                             lambda m: received['pose'].append(m), 10)
-    node.create_subscription(UInt16MultiArray, '/robot_location/ids',
-                             lambda m: received['ids'].append(m), 10)
-    node.create_subscription(PoseWithCovarianceStamped, '/robot_location/with_covariance',
-                             lambda m: received['cov'].append(m), 10)
-    publishers = {'image': node.create_publisher(Image, '/camera/image_raw', 10),
-                  'info': node.create_publisher(CameraInfo, '/camera/camera_info', 10)}
+    received = {'pose': [], 'ids': [], 'cov': [], 'target': [], 'diag': []}
+    # Relative names: the client is in the root namespace, like the locator.
+    node.create_subscription(PoseStamped, 'robot_location', received['pose'].append, 10)
+    node.create_subscription(UInt16MultiArray, 'robot_location/ids', received['ids'].append, 10)
+    node.create_subscription(PoseWithCovarianceStamped, 'robot_location/with_covariance',
+                             received['cov'].append, 10)
+    node.create_subscription(PointStamped, 'pattern_locator/target', received['target'].append,
+                             10)
+    node.create_subscription(DiagnosticArray, '/diagnostics', received['diag'].append, 10)
+    publishers = {'image': node.create_publisher(Image, 'camera/image_raw', 10),
+                  'info': node.create_publisher(CameraInfo, 'camera/camera_info', 10)}
     yield node, executor, publishers, received
 
 
@@ -85,46 +94,61 @@ def send(graph, image_message, info_message, stamp_s, timeout=8.0):
     return None
 
 
-def test_node_locates_the_robot_and_survives_bad_input(locator, graph):
+def diagnostics(received) -> dict:
+    """Return the locator's latest diagnostics values (empty before the first)."""
+    for array in reversed(received['diag']):
+        for status in array.status:
+            if status.name == 'pattern_locator: locator':
+                return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
+def position_error(pose) -> float:
+    p = pose.pose.position
+    return float(np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]))
+
+
+def test_node_locates_the_robot_and_points_at_the_card(locator, graph):
     node, executor, publishers, received = graph
     assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0
                       and publishers['info'].get_subscription_count() > 0, 20.0), \
         'the locator never subscribed: ' + locator.log.read_text()
-    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
-    good_info = info_msg(CAMERA)
+    image, T_room_camera = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
 
-    pose = send(graph, image_msg(image, 100), good_info, 100)
-    assert pose is not None, 'no /robot_location for a good image: ' + locator.log.read_text()
+    pose = send(graph, image_msg(image, 100), info_msg(CAMERA), 100)
+    assert pose is not None, 'no robot_location for a good image: ' + locator.log.read_text()
     assert pose.header.frame_id == 'floor_1/room_3'
-    p = pose.pose.position
-    assert np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]) < 0.04
+    assert position_error(pose) < 0.04
     assert spin_until(executor, lambda: received['ids'] and received['cov'], 3.0)
     assert list(received['ids'][-1].data) == [1, 3, 1]
     assert [d.label for d in received['ids'][-1].layout.dim] == ['floor', 'room', 'pattern']
     cov = np.array(received['cov'][-1].pose.covariance).reshape(6, 6)
     assert np.all(np.linalg.eigvalsh((cov + cov.T) / 2) > 0)
 
-    # Malformed input: each must give no pose, and the node must stay up.
-    short = image_msg(image, 201)
-    short.data = bytes(short.data)[:1000]
-    unknown = image_msg(image, 202)
-    unknown.encoding = 'weird16'
-    empty = Image()
-    empty.header.stamp.sec = 203
-    wrong_size = image_msg(image, 204)
-    for bad, info in ((short, good_info), (unknown, good_info), (empty, good_info),
-                      (wrong_size, info_msg(CAMERA, width=800))):
-        assert send(graph, bad, info, bad.header.stamp.sec, timeout=2.0) is None
-        assert locator.poll() is None, 'the locator died on bad input'
-    zero_k = info_msg(CAMERA)
-    zero_k.k = [0.0] * 9
-    assert send(graph, image_msg(image, 205), zero_k, 205, timeout=2.0) is None
+    # The target is what RViz can show: the card's centre in the optical frame, metres.
+    assert spin_until(executor, lambda: any(m.header.stamp.sec == 100
+                                            for m in received['target']), 3.0)
+    target = [m for m in received['target'] if m.header.stamp.sec == 100][0]
+    assert target.header.frame_id == 'camera_optical_frame'
+    card = BUILDING.card((1, 3, 1)).T_room_card.t
+    expected = T_room_camera.inverse().apply(card[None])[0]
+    got = np.array([target.point.x, target.point.y, target.point.z])
+    assert np.linalg.norm(got - expected) < 0.04, (got, expected)
+    assert 3.5 < expected[2] < 4.5       # in front, about 4 m away
 
-    # And a good image afterwards is still located.
-    assert send(graph, image_msg(image, 300), good_info, 300) is not None
-    stamps = {m.header.stamp.sec for m in received['pose']}
-    assert stamps <= {100, 300}, f'a pose for a stamp it should not have: {stamps}'
-    received['pose'].clear()
+
+def test_a_late_subscriber_gets_the_last_fix(locator, graph):
+    """robot_location/with_covariance is latched (transient local, depth 1) like amcl_pose."""
+    node, executor, publishers, received = graph
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    assert send(graph, image_msg(image, 150), info_msg(CAMERA), 150) is not None
+    late = []
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    node.create_subscription(PoseWithCovarianceStamped, 'robot_location/with_covariance',
+                             late.append, qos)
+    assert spin_until(executor, lambda: late, 5.0), 'a late subscriber got no fix'
+    assert len(late) == 1 and late[0].header.stamp.sec == 150
 
 
 def encoded(image, encoding: str, stamp_s: int) -> Image:
@@ -153,12 +177,10 @@ def test_every_encoding_gives_the_same_place(locator, graph):
     for k, encoding in enumerate(['rgb8', 'bgra8', 'yuv422', 'bayer_rggb8', 'bayer_gbrg8']):
         pose = send(graph, encoded(image, encoding, 400 + k), info, 400 + k)
         assert pose is not None, f'{encoding}: no pose: ' + locator.log.read_text()[-2000:]
-        p = pose.pose.position
-        error = np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]])
         # Bilinear demosaicing shifts dot centres by a fraction of a pixel: 2-3 %
         # of the distance here, against 0.3 % for the other encodings.
         tolerance = 0.15 if encoding.startswith('bayer') else 0.06
-        assert error < tolerance, f'{encoding}: {error:.3f} m off'
+        assert position_error(pose) < tolerance, f'{encoding}: {position_error(pose):.3f} m'
     # Grey: geometry only, so no location.
     assert send(graph, encoded(image, 'mono8', 450), info, 450, timeout=2.0) is None
     assert locator.poll() is None
@@ -167,7 +189,7 @@ def test_every_encoding_gives_the_same_place(locator, graph):
 def test_debug_image_while_someone_looks(locator, graph):
     node, executor, publishers, received = graph
     debug = []
-    node.create_subscription(Image, '/pattern_locator/debug_image', debug.append, 5)
+    node.create_subscription(Image, 'pattern_locator/debug_image', debug.append, 5)
     assert spin_until(executor, lambda: node.count_publishers('/pattern_locator/debug_image')
                       > 0, 10.0)
     image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
@@ -185,36 +207,143 @@ def test_each_image_uses_the_camera_info_of_its_own_stamp(locator, graph):
     assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0, 20.0)
     image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
     own = info_msg(CAMERA)
-    own.header.stamp.sec = 400
+    own.header.stamp.sec = 600
     zoomed = info_msg(CAMERA)
-    zoomed.header.stamp.sec = 401
+    zoomed.header.stamp.sec = 601
     zoomed.k = [2.0 * v if i in (0, 4) else v for i, v in enumerate(own.k)]
     zoomed.p = [2.0 * v if i in (0, 5) else v for i, v in enumerate(own.p)]
 
     def got():
-        return any(m.header.stamp.sec == 400 for m in received['pose'])
+        return any(m.header.stamp.sec == 600 for m in received['pose'])
 
     deadline = time.monotonic() + 8.0
     while not got() and time.monotonic() < deadline:
         publishers['info'].publish(own)
         publishers['info'].publish(zoomed)
         spin_until(executor, lambda: False, 0.05)
-        publishers['image'].publish(image_msg(image, 400))
+        publishers['image'].publish(image_msg(image, 600))
         spin_until(executor, got, 1.0)
-    pose = [m for m in received['pose'] if m.header.stamp.sec == 400]
+    pose = [m for m in received['pose'] if m.header.stamp.sec == 600]
     assert pose, locator.log.read_text()
-    p = pose[0].pose.position
-    assert np.linalg.norm([p.x - TRUTH.t[0], p.y - TRUTH.t[1], p.z - TRUTH.t[2]]) < 0.04
+    assert position_error(pose[0]) < 0.04
+
+
+class ParameterClient:
+    """rclpy clients of a node's parameter services (what ``ros2 param`` uses)."""
+
+    def __init__(self, node, executor, target: str):
+        self.executor = executor
+        self.set = node.create_client(SetParameters, f'{target}/set_parameters')
+        self.get = node.create_client(GetParameters, f'{target}/get_parameters')
+        self.describe = node.create_client(DescribeParameters, f'{target}/describe_parameters')
+        for client in (self.set, self.get, self.describe):
+            assert client.wait_for_service(timeout_sec=10.0), client.srv_name
+
+    def _call(self, client, request):
+        future = client.call_async(request)
+        assert spin_until(self.executor, future.done, 10.0), client.srv_name
+        return future.result()
+
+    def set_value(self, name: str, value):
+        """Return (successful, reason) of setting one parameter."""
+        request = SetParameters.Request()
+        request.parameters = [Parameter(name, value=value).to_parameter_msg()]
+        result = self._call(self.set, request).results[0]
+        return result.successful, result.reason
+
+    def value(self, name: str):
+        request = GetParameters.Request(names=[name])
+        value = self._call(self.get, request).values[0]
+        return {ParameterType.PARAMETER_STRING: value.string_value,
+                ParameterType.PARAMETER_DOUBLE: value.double_value,
+                ParameterType.PARAMETER_INTEGER: value.integer_value,
+                ParameterType.PARAMETER_BOOL: value.bool_value}[value.type]
+
+    def description(self, name: str):
+        return self._call(self.describe, DescribeParameters.Request(names=[name])).descriptors[0]
+
+
+def test_parameters_are_validated_and_applied_at_run_time(locator, graph):
+    node, executor, publishers, received = graph
+    params = ParameterClient(node, executor, '/locator')
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    info = info_msg(CAMERA)
+
+    # Descriptors: choices listed, ranges given, the read-only ones marked.
+    estimator = params.description('estimator')
+    assert 'one of: exact, paper' in estimator.additional_constraints
+    assert not estimator.read_only
+    assert params.description('building_map').read_only
+    assert params.description('head.mount_pitch_deg').read_only
+    tilt_range = params.description('min_tilt_deg').floating_point_range[0]
+    assert (tilt_range.from_value, tilt_range.to_value) == (0.0, 89.0)
+
+    # Refused, with the reason, and nothing changed.
+    ok, reason = params.set_value('estimator', 'bogus')
+    assert not ok and 'exact, paper' in reason
+    ok, reason = params.set_value('building_map', '/tmp/other.yaml')
+    assert not ok and 'read-only' in reason.lower()
+    ok, reason = params.set_value('max_reprojection_px', 1000.0)
+    assert not ok and 'range' in reason
+    ok, reason = params.set_value('max_reprojection_px', 3)
+    assert not ok and 'type' in reason.lower()
+    assert params.value('estimator') == 'exact'
+
+    # Applied: the paper's estimator, then the building frame.
+    assert params.set_value('estimator', 'paper') == (True, '')
+    assert params.value('estimator') == 'paper'
+    pose = send(graph, image_msg(image, 700), info, 700)
+    assert pose is not None, locator.log.read_text()[-2000:]
+    assert position_error(pose) < 0.05
+    assert spin_until(executor, lambda: diagnostics(received).get('estimator') == 'paper', 3.0)
+    assert spin_until(executor, lambda: any(m.header.stamp.sec == 700 for m in received['cov']),
+                      3.0)
+    cov = [m for m in received['cov'] if m.header.stamp.sec == 700][0]
+    c = np.array(cov.pose.covariance).reshape(6, 6)
+    assert np.all(np.linalg.eigvalsh((c + c.T) / 2) > 0)      # the paper's poses carry one
+
+    assert params.set_value('output_frame', 'building')[0]
+    pose = send(graph, image_msg(image, 701), info, 701)
+    assert pose is not None and pose.header.frame_id == 'building'
+
+    # A number: frames above max_image_pixels are refused before they are read.
+    before = int(diagnostics(received).get('refused_oversize', 0))
+    assert params.set_value('max_image_pixels', 640 * 480 - 1)[0]
+    publishers['info'].publish(info)
+    publishers['image'].publish(image_msg(image, 702))
+    assert spin_until(executor, lambda: int(diagnostics(received).get(
+        'refused_oversize', 0)) > before, 5.0)
+    assert not any(m.header.stamp.sec == 702 for m in received['pose'])
+
+    for name, value in (('estimator', 'exact'), ('output_frame', 'room'),
+                        ('max_image_pixels', 4_194_304)):
+        assert params.set_value(name, value)[0]
+    pose = send(graph, image_msg(image, 703), info, 703)
+    assert pose is not None and pose.header.frame_id == 'floor_1/room_3'
+
+
+def test_diagnostics_report_processing_and_waiting_apart(locator, graph):
+    node, executor, publishers, received = graph
+    assert spin_until(executor, lambda: 'processing_ms_median' in diagnostics(received)
+                      and diagnostics(received)['processing_ms_median'] != 'n/a', 5.0)
+    values = diagnostics(received)
+    for key in ('processing_ms_median', 'processing_ms_p95', 'joint_wait_ms_median',
+                'queue_ms_median', 'in_node_ms_median'):
+        assert float(values[key]) >= 0.0, key
+    # Fixed head angles: nothing is waited for.
+    assert float(values['joint_wait_ms_max']) < 1.0
 
 
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):
+    import signal
     locator.send_signal(signal.SIGINT)
     locator.wait(timeout=15)
     output = locator.log.read_text()
     assert locator.returncode == 0, output
     assert 'Traceback' not in output, output
-    # The malformed input of the first test was reported, not ignored.
-    assert 'weird16' in output and 'camera_info is for 800x480' in output
+    # Run-time changes are logged, and no log line is long.
+    assert 'parameters set: estimator=' in output
+    assert max(len(line) for line in output.splitlines()) < 1200
 
 
 def test_a_bad_configuration_exits_1_with_one_line_on_stderr(tmp_path):

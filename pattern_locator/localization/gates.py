@@ -76,6 +76,9 @@ class GateParameters:
     # inside the box of every sized room; 'off'.
     footprint: str = 'room'
     footprint_margin_m: float = 0.5
+    # Judge each fix against the last one (off: every image stands alone, as
+    # for unrelated still images; the static gates still apply).
+    continuity: bool = True
     # Continuity, without odometry: how fast the base can move and turn.
     max_speed_m_s: float = 1.0
     max_yaw_rate_deg_s: float = 90.0
@@ -100,9 +103,9 @@ class GateParameters:
                 if value not in FOOTPRINTS:
                     raise ConfigError(f'gates: footprint must be one of '
                                       f'{", ".join(FOOTPRINTS)}, got {value!r}')
-            elif f.name == 'confirm_first_fix':
+            elif f.name in ('confirm_first_fix', 'continuity'):
                 if not isinstance(value, bool):
-                    raise ConfigError(f'gates: confirm_first_fix must be true or false, got '
+                    raise ConfigError(f'gates: {f.name} must be true or false, got '
                                       f'{value!r}')
             elif (isinstance(value, bool) or not isinstance(value, (int, float))
                   or not math.isfinite(value)):
@@ -313,14 +316,14 @@ class FixGates:
         """
         Return why a fix is held back (counted), or None to return it (it becomes the last).
 
-        Without a stamp, continuity cannot be judged: the fix passes and
-        nothing is remembered. ``odometry``: the base's motion since
+        Without a stamp, or with ``continuity`` off, continuity is not
+        judged: the fix passes and nothing is remembered. ``odometry``: the base's motion since
         :attr:`last_stamp`; it is used when its ``since_stamp_s`` is that
         stamp (within 1 ms), else the maximum speed and yaw rate are.
         """
-        if stamp_s is None or not math.isfinite(stamp_s):
-            return None
         p = self.parameters
+        if not p.continuity or stamp_s is None or not math.isfinite(stamp_s):
+            return None
         T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
         fix = _Fix(float(stamp_s), T, cov)
         last = self._accepted

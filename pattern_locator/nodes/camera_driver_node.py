@@ -66,11 +66,6 @@ from ..visca.zoom_table import ZoomTable
 
 THROTTLE_S = 5.0
 CAMERA_INFO_HISTORY = 60
-# Positions older than this many control periods (and at least FRESH_MIN_S)
-# are not fresh: diagnostics WARN; after STALE_ERROR_S without one, ERROR.
-FRESH_PERIODS = 3.0
-FRESH_MIN_S = 0.5
-STALE_ERROR_S = 5.0
 BACKOFF_MAX_S = 5.0
 
 TRACKING_PARAMETERS = (
@@ -167,7 +162,7 @@ class CameraDriverNode(Node):
         controller = TrackingController(tracking_params(p)) if p['tracking'] else None
         self.camera = EviD31(p['port'], baud=p['baud'], address=p['address'])
         self.loop = HeadLoop(self.camera, controller, clock=self._now_s,
-                             zoom_every=p['zoom_every'])
+                             zoom_every=p['zoom_every'], expected_rate_hz=p['rate_hz'])
         self.problems = ProblemLog(self.get_logger(), THROTTLE_S)
         # Changes for the camera thread, applied between two cycles.
         self._pending: Dict[str, Any] = {}
@@ -193,7 +188,6 @@ class CameraDriverNode(Node):
         self.readings = 0
         self.targets = 0
         self._last_reading_at: Optional[float] = None
-        self._started_at = time.monotonic()
         self._state = 'starting'
         self._failing = False
         self._stopping = threading.Event()
@@ -227,6 +221,8 @@ class CameraDriverNode(Node):
         p = self.params
         if 'zoom_every' in changed:
             self.loop.zoom_every = max(1, int(p['zoom_every']))
+        if 'rate_hz' in changed:
+            self.loop.set_expected_rate(p['rate_hz'])
         if set(changed) & set(TRACKING_PARAMETERS + ('tracking',)):
             # A new controller (its history is short: the next targets rebuild
             # it), or none; either way the head stops first, since the last
@@ -371,26 +367,19 @@ class CameraDriverNode(Node):
 
     # Diagnostics ------------------------------------------------------------------------
 
-    def health(self) -> Tuple[int, str]:
-        """Return the diagnostics level and message: OK only while fresh positions flow."""
-        now = time.monotonic()
-        fresh_s = max(FRESH_MIN_S, FRESH_PERIODS / self.params['rate_hz'])
-        since = self._last_reading_at
-        age = None if since is None else now - since
+    def health(self) -> Tuple[bytes, str]:
+        """
+        Return the diagnostics level and message: OK only while fresh positions flow.
+
+        A port that is missing or a start-up that failed is the node's own
+        ERROR; otherwise the head loop judges the link (fresh positions at
+        the expected rate, failed reads, error-only replies, silence).
+        """
         if self._failing:
             return DiagnosticStatus.ERROR, self._state
-        if age is not None and age <= fresh_s and self.camera.ready:
-            error = self.loop.last_error
-            return DiagnosticStatus.OK, 'positions flowing' + (
-                f'; last error: {error}' if error else '')
-        if age is None:
-            waited = now - self._started_at
-            level = (DiagnosticStatus.ERROR if waited > self.params['startup_timeout_s']
-                     else DiagnosticStatus.WARN)
-            return level, f'no position yet ({self._state}, {waited:.1f} s)'
-        level = DiagnosticStatus.ERROR if age > STALE_ERROR_S else DiagnosticStatus.WARN
-        why = self.loop.last_error or self.camera.transport.last_error or self._state
-        return level, f'no position for {age:.1f} s ({why})'
+        health = self.loop.health()
+        # DiagnosticStatus.level is a byte (OK = b'\x00'), HeadHealth's an int.
+        return bytes((health.level,)), health.message
 
     def _publish_diagnostics(self) -> None:
         transport = self.camera.transport
@@ -429,6 +418,8 @@ class CameraDriverNode(Node):
     def stop(self) -> None:
         """Stop the camera thread within a fraction of a second; the head is stopped."""
         self._stopping.set()
+        # Ends every wait on the camera at once (a silent camera, a start-up).
+        self.loop.stop()
         self._thread.join(timeout=0.3)
         if self._thread.is_alive():
             # Blocked on the camera (a start-up, an unanswered inquiry): closing

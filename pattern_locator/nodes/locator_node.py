@@ -38,6 +38,7 @@ published, whatever the core returns.
 """
 
 import collections
+import dataclasses
 import math
 import threading
 import time
@@ -60,6 +61,7 @@ from .ros_helpers import (all_finite, describe_values, fill_pose, Param, Paramet
 from ..card.pattern import load_pattern_config
 from ..errors import PatternLocatorError
 from ..localization.building import load_building
+from ..localization.gates import GateParameters
 from ..localization.head import angles_from_joint_state, HeadGeometry, JointStateBuffer
 from ..localization.localizer import FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotLocalizer
 from ..vision.camera import CameraModel
@@ -115,7 +117,66 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('head.tilt_to_optical_xyz', [0.03, 0.0, 0.05], 'tilt joint to the optical centre (m)'),
     Param('head.mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this: tilt 0 '
           'looks up by it (deg)', -60.0, 60.0),
+    Param('joint_margin_deg', 5.0, "joint states beyond the head's travel by more than this "
+          'are refused', 0.0, 45.0),
 )
+
+# The output gates (localization/gates.py), one parameter each: a fix is
+# published only if it passes them all. (description, low, high or choices)
+_GATE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
+    'max_position_sigma_m': ('largest position standard deviation of a fix (m)', 0.001, 100.0),
+    'min_camera_distance_m': ('camera nearer its card than this: refused (m)', 0.0, 100.0),
+    'max_camera_distance_m': ('camera farther from its card than this: refused (m)', 0.1,
+                              1000.0),
+    'max_view_angle_deg': ("camera further off the card's normal: refused (deg)", 1.0, 90.0),
+    'min_base_height_m': ("base below its room's floor by more: refused (m)", -100.0, 100.0),
+    'max_base_height_m': ("base above its room's floor by more: refused (m)", -100.0, 100.0),
+    'max_roll_deg': ('base rolled more than this: refused (deg)', 0.0, 180.0),
+    'max_pitch_deg': ('base pitched more than this: refused (deg)', 0.0, 180.0),
+    'footprint': ("where the base may be: inside the card's room, the building, or anywhere",
+                  ('room', 'building', 'off'), None),
+    'footprint_margin_m': ('margin around the footprint (m)', 0.0, 100.0),
+    'continuity': ('judge each fix against the last one (false: every image stands alone, '
+                   'as for unrelated still images)', None, None),
+    'max_speed_m_s': ('fastest the base moves, without odometry (m/s)', 0.01, 100.0),
+    'max_yaw_rate_deg_s': ('fastest the base turns, without odometry (deg/s)', 0.1, 3600.0),
+    'max_jump_mahalanobis': ('a fix further than this from what motion allows waits for a '
+                             'second agreeing image', 0.5, 1000.0),
+    'jump_sigma_floor_m': ('position sigma added when judging a jump (m)', 0.0, 10.0),
+    'jump_sigma_floor_deg': ('rotation sigma added when judging a jump (deg)', 0.0, 180.0),
+    'confirm_within_s': ('a held-back fix is published when an image this much later agrees '
+                         '(s)', 0.0, 60.0),
+    'confirm_first_fix': ('hold back the first fix too until a second image agrees', None,
+                          None),
+    'clock_jump_back_s': ('stamps going back more than this restart continuity (s)', 0.0,
+                          3600.0),
+}
+
+
+def _gate_parameters() -> Tuple[Param, ...]:
+    defaults = GateParameters()
+    params = []
+    for field in dataclasses.fields(GateParameters):
+        description, low, high = _GATE_DESCRIPTIONS[field.name]
+        default = getattr(defaults, field.name)
+        if isinstance(low, tuple):
+            params.append(Param(f'gates.{field.name}', default, description, choices=low,
+                                dynamic=True))
+        elif isinstance(default, bool):
+            params.append(Param(f'gates.{field.name}', default, description, dynamic=True))
+        else:
+            params.append(Param(f'gates.{field.name}', float(default), description, low, high,
+                                dynamic=True))
+    return tuple(params)
+
+
+PARAMETERS = PARAMETERS + _gate_parameters()
+
+
+def gate_parameters(values: Dict[str, Any]) -> GateParameters:
+    """Return the gates' thresholds from the node's ``gates.*`` parameter values."""
+    return GateParameters(**{name[len('gates.'):]: value for name, value in values.items()
+                             if name.startswith('gates.')})
 
 
 def card_centre_from_homography(H: np.ndarray, camera: CameraModel) -> Optional[np.ndarray]:
@@ -174,7 +235,10 @@ class LocatorNode(Node):
         super().__init__('locator', **kwargs)
         self.parameters = Parameters(self, PARAMETERS)
         p = self.parameters.values()
-        self.get_logger().info('locator configuration: ' + describe_values(p))
+        self.get_logger().info('locator configuration: ' + describe_values(
+            {k: v for k, v in p.items() if not k.startswith('gates.')}))
+        self.get_logger().info('locator gates: ' + describe_values(
+            {k[len('gates.'):]: v for k, v in p.items() if k.startswith('gates.')}))
         cv2.setNumThreads(int(p['opencv_threads']))
         self.pattern = load_pattern_config(p['pattern_config'] or None)
         building = load_building(p['building_map'] or None, self.pattern)
@@ -186,8 +250,11 @@ class LocatorNode(Node):
         self.localizer = RobotLocalizer(
             self.pattern, building, self.head, estimator=p['estimator'],
             output_frame=p['output_frame'], fusion=p['fusion'],
-            min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'])
-        self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'])
+            min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'],
+            gates=gate_parameters(p))
+        self.joint_margin_rad = math.radians(p['joint_margin_deg'])
+        self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'], head=self.head,
+                                       margin_rad=self.joint_margin_rad)
         self.settings: Dict[str, Any] = dict(p)
         # The worker holds this while it processes a frame; run-time
         # parameter changes take it to change the localizer between frames.
@@ -265,8 +332,9 @@ class LocatorNode(Node):
 
     @staticmethod
     def _validate(values: Dict[str, Any]) -> Optional[str]:
-        # Ranges and choices are checked by Parameters; nothing depends on two
-        # parameters at once here.
+        # Ranges and choices are checked by Parameters; the gates also check
+        # their thresholds together (a minimum below its maximum).
+        gate_parameters(values)          # ConfigError: refused with its reason
         return None
 
     def _apply(self, changed: Dict[str, Any]) -> None:
@@ -280,6 +348,8 @@ class LocatorNode(Node):
             self.localizer.fusion = s['fusion']
             self.localizer.max_reprojection_px = float(s['max_reprojection_px'])
             self.joints.max_age_s = float(s['joint_state_max_age_s'])
+            if any(name.startswith('gates.') for name in changed):
+                self.localizer.gates.parameters = gate_parameters(s)
             if 'estimator' in changed or 'output_frame' in changed:
                 # A fix from the other estimator or frame is no prior for the next.
                 self.localizer.last_fix = None
@@ -336,13 +406,16 @@ class LocatorNode(Node):
 
     def _on_joints(self, msg: JointState) -> None:
         try:
-            pan, tilt = angles_from_joint_state(msg.name, msg.position)
+            pan, tilt = angles_from_joint_state(msg.name, msg.position, head=self.head,
+                                                margin_rad=self.joint_margin_rad)
             stamp = stamp_seconds(msg.header.stamp)
             latest = self.joints.latest()
             if latest is not None and stamp < latest[0] - CLOCK_JUMP_S:
                 # The clock went back (a bag replayed again, a simulator reset).
                 self.joints.clear()
                 self._joint_first_stamp = None
+                # The gates restart continuity on their own when the images'
+                # stamps go back: a stray joint state must not clear them.
                 with self._stats_lock:
                     self.stats['clock_jumps'] += 1
                 self.get_logger().info(
@@ -412,7 +485,8 @@ class LocatorNode(Node):
         if angles is None:
             return
         with self._settings_lock:
-            result = self.localizer.process(image, camera, *angles)
+            result = self.localizer.process(image, camera, *angles,
+                                            stamp_s=stamp_seconds(msg.header.stamp))
             self._publish(msg, result, image, camera)
         for problem, reason in zip(result.problems, rejection_reasons(result)):
             self.problems.report(f'rejected: {reason}', problem)
@@ -563,6 +637,8 @@ class LocatorNode(Node):
         status.message = 'running' if ok else self._camera_problem[:200]
         values = dict(s)
         values['rejected'] = sum(counts.values())
+        values.update({f'gate_rejected_{reason}': n
+                       for reason, n in self.localizer.rejection_counts().items()})
         values['last_problem'] = last
         values['estimator'] = self.localizer.locator.estimator
         values['output_frame'] = self.localizer.output_frame

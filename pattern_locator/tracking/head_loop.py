@@ -181,6 +181,11 @@ class HeadLoop:
             self.controller.reset()
         self._sent_key = None
 
+    def set_expected_rate(self, rate_hz: float) -> None:
+        """Change the cycle rate :meth:`health` expects (a run-time parameter change)."""
+        self._health.expected_rate_hz = float(rate_hz)
+        self._health.stale_after_s = max(0.3, 3.0 / float(rate_hz))
+
     def health(self) -> HeadHealth:
         """Return the driver's health for diagnostics: OK only while fresh positions flow."""
         camera = self.camera

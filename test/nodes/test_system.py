@@ -110,7 +110,7 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         aim(-0.2, 0.0, 2.5)
         assert camera.state().pan_deg == pytest.approx(math.degrees(0.2), abs=1.0)
         assert spin_until(executor, lambda: diagnostics and diagnostics[-1].status[0].level
-                          == DiagnosticStatus.OK, 3.0)
+                          == DiagnosticStatus.OK, 3.0), diagnostics[-1].status[0].message
         # Zoom: the card's apparent size comes from its distance and the fx of
         # the target's camera_info: 3 m at fx 554 px is 21 px, under the 120
         # px aimed at, so the camera zooms in.

@@ -47,6 +47,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from ..errors import PatternLocatorError
 from ..localization.gates import GateParameters
 from ..localization.gaze import feed_forward_rates, GazePlanner
 from ..localization.head import angle_jacobian, base_pose_from_camera, HeadGeometry, \
@@ -463,7 +464,6 @@ def centre_noise(views: int = 60, seed: int = 1, route: str = 'loop') -> Dict[st
     its dots) and the fit's own residual noise (``residual_px``, what the
     estimator sees), medians and 95th percentiles over cards.
     """
-    from ..localization.uncertainty import UncertaintyParameters as _Params  # noqa: F401
     from ..vision.detector import Detector
     from ..vision.pose_exact import ellipse_centres, estimate_exact
     sim = FloorSim.floor(route, seed=seed)
@@ -645,16 +645,33 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--as-hung', action='store_true',
                         help='cards off their mapped pose (the map giving its std_dev)')
     parser.add_argument('--json', metavar='FILE', help='write the summaries as JSON')
+    parser.add_argument('--centre-noise', type=int, metavar='VIEWS', default=0,
+                        help="only measure the detector's dot-centre noise on VIEWS still "
+                             'frames (the pixel floor of the covariance) and exit')
     args = parser.parse_args(argv)
+    if args.centre_noise > 0:
+        noise = centre_noise(args.centre_noise, int(args.seeds.split(',')[0] or 1), args.route
+                             if args.route != 'short' else 'loop')
+        print(f'dot-centre noise on {noise["cards"]} still cards (median, p95): per axis '
+              f'{noise["sigma_px"][0]:.4f}, {noise["sigma_px"][1]:.4f} px; common shift '
+              f'{noise["shift_px"][0]:.4f}, {noise["shift_px"][1]:.4f} px; the fit\'s residual '
+              f'noise {noise["residual_px"][0]:.4f}, {noise["residual_px"][1]:.4f} px')
+        return 0
     try:
         seeds = [int(s) for s in args.seeds.split(',') if s.strip()]
     except ValueError:
         print(f'bench --drive-core: --seeds must be integers, got {args.seeds!r}',
               file=sys.stderr)
         return 2
-    if not seeds or not (0.5 <= args.rate <= 25.0) or not (0.05 <= args.max_speed <= 0.8):
-        print('bench --drive-core: need a seed, --rate within 0.5..25 and --max-speed within '
-              '0.05..0.8', file=sys.stderr)
+    if not seeds or not (0.5 <= args.rate <= 25.0) or not (0.05 <= args.max_speed <= 0.8) or (
+            args.seconds is not None and not args.seconds > 0.0):
+        print('bench --drive-core: need a seed, --rate within 0.5..25, --max-speed within '
+              '0.05..0.8 and --seconds > 0', file=sys.stderr)
+        return 2
+    try:
+        FloorSim.floor(args.route)
+    except PatternLocatorError as exc:
+        print(f'bench --drive-core: {exc}', file=sys.stderr)
         return 2
     modes = ('fisher', 'model') if args.covariance == 'both' else (args.covariance,)
     summaries = {}

@@ -20,9 +20,10 @@ A card is **predicted visible** when
   ``min_opening_m`` (within ``touch_m``: the corridors of a loop) are one
   space, and rooms a wall's thickness apart are not. A card is a
   candidate only if its room is in the robot's space and the straight
-  line from the camera to the card stays inside that space's footprints
-  (the first ``doorway_m`` of it excepted when the robot is in a
-  doorway). Rooms without a size are never predicted visible, except
+  lines from the camera to the card's centre and side edges stay inside
+  that space's footprints with ``sight_clearance_m`` to spare (so that a
+  wall's corner is not grazed; the first ``doorway_m`` of them, where the
+  robot stands, excepted). Rooms without a size are never predicted visible, except
   the room of ``room_hint`` (the last fix's).
 
 Among the candidates the best has the lowest **score**: its distance
@@ -70,7 +71,9 @@ class GazeParameters:
     doorway_m: float = 0.4
     touch_m: float = 0.05
     min_opening_m: float = 0.5
-    sight_step_m: float = 0.1
+    sight_step_m: float = 0.05
+    sight_clearance_m: float = 0.1
+    card_half_width_m: float = 0.15
     lookahead_s: float = 1.5
     switch_ratio: float = 0.7
     view_weight: float = 1.0
@@ -216,8 +219,7 @@ class GazePlanner:
             if not (pan_lo + pan_margin <= pan <= pan_hi - pan_margin
                     and tilt_lo + tilt_margin <= tilt <= tilt_hi - tilt_margin):
                 continue
-            if room in self._footprints and not self._clear(eye, self._centres[k],
-                                                            self._normals[k], allowed, doorway):
+            if room in self._footprints and not self._clear(eye, card, allowed):
                 continue
             view = math.degrees(math.acos(min(1.0, float(cos_view[k]))))
             score = float(distance[k]) * (1.0 + p.view_weight * (1.0 / float(cos_view[k]) - 1.0))
@@ -226,25 +228,46 @@ class GazePlanner:
             out.append(CardOption(card.ids, pan, tilt, float(distance[k]), view, score))
         return sorted(out, key=lambda o: o.score)
 
-    def _clear(self, eye: np.ndarray, centre: np.ndarray, normal: np.ndarray, allowed: set,
-               doorway: bool) -> bool:
-        """Return whether the line of sight stays inside the allowed rooms' footprints."""
+    def _clear(self, eye: np.ndarray, card: MappedCard, allowed: set) -> bool:
+        """
+        Return whether the lines of sight to the card's centre and side edges stay in the space.
+
+        Each sample, with a ring of points ``sight_clearance_m`` round it (so
+        that a wall's corner is not grazed), must lie inside the allowed
+        rooms' footprints, except the first ``doorway_m`` from the eye (the
+        robot stands where it stands: by a wall, in a doorway) and what is
+        closer than ``sight_clearance_m`` to the card's wall (it hangs on a
+        footprint's edge).
+        """
         p = self.parameters
+        T = card.T_building_card
+        ends = [T.t + T.R @ np.array([x, 0.0, 0.02]) for x in
+                (0.0, -p.card_half_width_m, p.card_half_width_m)]
         start = eye[:2]
-        end = (centre + 0.05 * normal)[:2]
-        length = float(np.linalg.norm(end - start))
-        n = max(int(math.ceil(length / p.sight_step_m)), 1)
-        f = np.linspace(0.0, 1.0, n + 1)
-        points = start + f[:, None] * (end - start)
-        if doorway:
-            points = points[f * length > p.doorway_m]
+        samples = []
+        for end in ends:
+            end = end[:2]
+            length = float(np.linalg.norm(end - start))
+            n = max(int(math.ceil(length / p.sight_step_m)), 1)
+            along = np.linspace(0.0, length, n + 1)
+            if length <= 0.0:
+                continue
+            points = start + (along / length)[:, None] * (end - start)
+            # Off the card's wall by less than the clearance: the wall it hangs on.
+            off_wall = (points - T.t[:2]) @ T.R[:2, 2]
+            keep = (along > p.doorway_m) & (off_wall > p.sight_clearance_m)
+            samples.append(points[keep])
+        points = np.vstack(samples) if samples else np.zeros((0, 2))
         if not len(points):
             return True
-        inside = np.zeros(len(points), dtype=bool)
+        angles = np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
+        ring = p.sight_clearance_m * np.column_stack([np.cos(angles), np.sin(angles)])
+        probes = np.vstack([points] + [points + r for r in ring])
+        inside = np.zeros(len(probes), dtype=bool)
         for key in allowed:
             footprint = self._footprints.get(key)
             if footprint is not None:
-                inside |= footprint.contains(points, 0.01)
+                inside |= footprint.contains(probes, 1e-6)
         return bool(inside.all())
 
     # Choice ------------------------------------------------------------------------------

@@ -287,6 +287,8 @@ class OdomBuffer:
             return None
         i = bisect.bisect_right(stamps, stamp)
         s0, s1 = stamps[i - 1], stamps[i]
+        if s0 == stamp:
+            return self._poses[i - 1], self._covariances[i - 1], self._twists[i - 1]
         if s1 - s0 > self.max_gap_s:
             return None
         w = (stamp - s0) / (s1 - s0) if s1 > s0 else 0.0

@@ -90,7 +90,7 @@ class UncertaintyParameters:
     map_position_sigma_m: float = 0.0
     map_rotation_sigma_deg: float = 0.0
     # What a still view leaves unexplained (a bias of the renderer and detector).
-    floor_position_m: float = 0.001
+    floor_position_m: float = 0.0
     floor_rotation_deg: float = 0.0
 
     def __post_init__(self) -> None:

@@ -204,12 +204,17 @@ def _uncertainty(config: DriveCoreConfig) -> Optional[UncertaintyParameters]:
         return UncertaintyParameters.fisher_only()
     params = config.uncertainty or UncertaintyParameters()
     exposure = EXPOSURES[config.exposure]
+    # What a node is configured with: its camera's exposure and its camera
+    # link's stamp error (the default timing's is the parameters' default).
     params = replace(params, exposure_s=exposure.exposure_s,
                      field_period_s=exposure.field_period_s if exposure.interlace else 0.0)
+    if config.timing != JointTiming():
+        params = replace(params, joint_stamp_sigma_s=config.timing.stamp_error_rms())
     if config.as_hung:
         # The sim's as-hung errors (FloorWorld.as_hung: a shift uniform in a disc
         # of 5 cm, a turn uniform up to 3 deg about a random axis) have these
-        # standard deviations per axis: 5 / 2 cm, 3 / sqrt(9) deg.
+        # standard deviations per axis: 5 / 2 cm, and sqrt(E[angle^2] / 3) =
+        # sqrt(3 / 3) = 1 deg.
         params = replace(params, map_position_sigma_m=0.025, map_rotation_sigma_deg=1.0)
     return params
 
@@ -642,6 +647,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--exposure', choices=sorted(EXPOSURES), default='blur')
     parser.add_argument('--covariance', choices=('model', 'fisher', 'both'), default='both',
                         help="the covariance model, the estimator's alone, or both in turn")
+    parser.add_argument('--joint-hz', type=float, default=10.0,
+                        help='joint state rate of the simulated driver (default 10)')
+    parser.add_argument('--usb-latency-ms', type=float, default=16.0,
+                        help="the stamps' lateness, uniform up to this (default 16, an FTDI "
+                             "adapter's latency timer); the model's joint_stamp_sigma_s follows")
     parser.add_argument('--as-hung', action='store_true',
                         help='cards off their mapped pose (the map giving its std_dev)')
     parser.add_argument('--json', metavar='FILE', help='write the summaries as JSON')
@@ -664,9 +674,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
               file=sys.stderr)
         return 2
     if not seeds or not (0.5 <= args.rate <= 25.0) or not (0.05 <= args.max_speed <= 0.8) or (
-            args.seconds is not None and not args.seconds > 0.0):
+            args.seconds is not None and not args.seconds > 0.0) or not (
+            1.0 <= args.joint_hz <= 50.0) or not (0.0 <= args.usb_latency_ms <= 200.0):
         print('bench --drive-core: need a seed, --rate within 0.5..25, --max-speed within '
-              '0.05..0.8 and --seconds > 0', file=sys.stderr)
+              '0.05..0.8, --seconds > 0, --joint-hz within 1..50 and --usb-latency-ms within '
+              '0..200', file=sys.stderr)
         return 2
     try:
         FloorSim.floor(args.route)
@@ -679,16 +691,20 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         records: List[FrameRecord] = []
         start = time.perf_counter()
         for seed in seeds:
+            timing = replace(JointTiming(), period_s=1.0 / args.joint_hz,
+                             usb_latency_s=args.usb_latency_ms / 1000.0)
             config = DriveCoreConfig(route=args.route, seconds=args.seconds,
                                      frame_rate_hz=args.rate, max_speed_m_s=args.max_speed,
                                      exposure=args.exposure, covariance=mode,
-                                     as_hung=args.as_hung, seed=seed)
+                                     as_hung=args.as_hung, seed=seed, timing=timing)
             records.extend(run(config, progress=True))
         elapsed = time.perf_counter() - start
         summary = summarise(records)
         summaries[mode] = summary
+        timing = ('' if (args.joint_hz, args.usb_latency_ms) == (10.0, 16.0) else
+                  f', joint states {args.joint_hz:g} Hz late by <= {args.usb_latency_ms:g} ms')
         title = (f'{args.route}, seeds {",".join(map(str, seeds))}, {args.rate:g} fps, '
-                 f'<= {args.max_speed:g} m/s, {args.exposure}'
+                 f'<= {args.max_speed:g} m/s, {args.exposure}{timing}'
                  f'{", as hung" if args.as_hung else ""}: covariance {mode} '
                  f'({elapsed:.0f} s)')
         print('\n'.join(report(summary, title)), flush=True)

@@ -6,7 +6,9 @@ only if: its pose and covariance are finite and the covariance is positive
 definite and not huge; the camera is in front of the card, at a plausible
 distance and angle; the base is on the floor of its room (height, roll and
 pitch within bounds) and inside the room's footprint from the building map
-(plus a margin), or inside the building when the room has no size. The
+(plus a margin) or, with ``footprint='adjacent'`` (a robot driving through
+the building sees cards through doors), in a room next to it; inside the
+building when the room has no size. The
 **continuity gate** (:meth:`FixGates.check_continuity`) compares the fix
 with the last one returned: a jump beyond what the robot's motion allows
 (its odometry when given, else a maximum speed and yaw rate), by

@@ -127,12 +127,12 @@ class GazeChoice:
 
     @property
     def pan(self) -> float:
-        """Return the head's pan (rad) that aims at the card."""
+        """Return the head's pan angle that aims at the card, in radians."""
         return self.option.pan
 
     @property
     def tilt(self) -> float:
-        """Return the head's tilt (rad) that aims at the card."""
+        """Return the head's tilt angle that aims at the card, in radians."""
         return self.option.tilt
 
 

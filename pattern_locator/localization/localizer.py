@@ -10,7 +10,13 @@ gates (:mod:`.gates`: finite, positive definite, camera in front of the
 card, base on the floor of its room); several cards in view: the paper's
 rule (the biggest complete card) or a covariance-weighted fusion of them.
 Given the image's stamp, the fix must also be continuous with the last one
-(a jump waits for a second agreeing image). A :class:`FrameResult` without
+(a jump waits for a second agreeing image; odometry since the last fix,
+``odom.OdomBuffer.motion_between``, says how far the robot can have moved).
+A fix's covariance is :mod:`.uncertainty`'s model, term by term
+(``RobotFix.uncertainty``): the image's, the head's angles at the image's
+stamp (pass ``head_motion`` from ``JointStateBuffer.motion_at`` and the
+base's twist), the map's own; ``uncertainty=None`` gives the estimator's
+Fisher covariance alone, as before issue 12. A :class:`FrameResult` without
 a fix says why (``no_fix_reason``) and which gates refused what
 (``rejections``); :meth:`RobotLocalizer.rejection_counts` counts them.
 """

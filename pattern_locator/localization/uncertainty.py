@@ -89,7 +89,9 @@ class UncertaintyParameters:
     tilt_step_rad: float = EVI_D31_TILT_STEP_RAD
     map_position_sigma_m: float = 0.0
     map_rotation_sigma_deg: float = 0.0
-    # What a still view leaves unexplained (a bias of the renderer and detector).
+    # What the other terms leave unexplained: 0 in the sim (a 1 mm floor made
+    # the covariance too cautious, coverage_95 0.985-0.99); a real camera's
+    # calibration error is a reason to raise it.
     floor_position_m: float = 0.0
     floor_rotation_deg: float = 0.0
 

@@ -7,8 +7,8 @@ import numpy as np
 from pattern_locator.errors import ConfigError
 from pattern_locator.localization.building import load_building
 from pattern_locator.localization.gates import compose_with_motion, pose_in_building
-from pattern_locator.localization.odom import (BaseTwist, OdomBridge, OdomBuffer, OdomNoise,
-                                               odom_pose)
+from pattern_locator.localization.odom import (BaseTwist, odom_pose, OdomBridge, OdomBuffer,
+                                               OdomNoise)
 from pattern_locator.resources import config_path
 from pattern_locator.sim.drive import DriveRoute, Waypoint
 from pattern_locator.sim.odometry import OdometryModel, OdometrySim
@@ -20,7 +20,7 @@ NO_FLOOR = OdomNoise(0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def arc(t):
-    """The exact pose of a base driving a left-hand circle of radius 2 m at 0.5 m/s."""
+    """Return the exact pose of a base driving a left-hand circle of radius 2 m at 0.5 m/s."""
     yaw = 0.25 * t
     return odom_pose(2.0 * math.sin(yaw), 2.0 * (1.0 - math.cos(yaw)), yaw)
 
@@ -164,7 +164,7 @@ def _simulated(seconds=45.0, seed=3):
 
 
 def simulated():
-    """A route along the floor's corridors and its odometry (with drift) in a buffer."""
+    """Return a route along the floor's corridors and its odometry (with drift) in a buffer."""
     route, samples = _simulated()
     buffer = OdomBuffer(history_s=120.0)
     for sample in samples:

@@ -17,7 +17,7 @@ from pattern_locator.localization.uncertainty import (card_std_dev, chi2_95, fix
                                                       UncertaintyParameters)
 from pattern_locator.sim.floor_sim import FloorSim
 from pattern_locator.visca.zoom_table import ZoomTable
-from pattern_locator.vision.geometry import look_at, Pose
+from pattern_locator.vision.geometry import Pose
 import pytest
 
 PATTERN = load_pattern_config()

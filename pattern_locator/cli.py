@@ -133,6 +133,10 @@ def _parser() -> argparse.ArgumentParser:
                             'non-finite values, tracebacks, memory, log volume')
     bench.add_argument('--messages', type=int, default=32_000,
                        help='messages of the --fuzz run (default 32000; --quick: 3000)')
+    bench.add_argument('--drive-core', nargs=argparse.REMAINDER, metavar='OPTION',
+                       help='the ROS-free cores of issue 12 on the simulated floor (covariance '
+                            'coverage, odometry bridge, gaze); the options after it are its '
+                            'own (--drive-core --help)')
     bench.set_defaults(handler=_bench)
 
     bag = sub.add_parser('bag', help='record a simulated route, or play a bag into ROS',
@@ -336,6 +340,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
+    if args.drive_core is not None:
+        from .evaluation.drive_core import main as drive_core_main
+        return drive_core_main(args.drive_core)
     if args.tracking:
         from .evaluation.bench_tracking import run_tracking_bench
         return run_tracking_bench()

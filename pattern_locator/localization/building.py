@@ -41,7 +41,8 @@ _BUILDING_KEYS = ('frame',)
 _FLOOR_KEYS = ('floor', 'name', 'rooms')
 _ROOM_KEYS = ('room', 'name', 'frame', 'pose', 'relative_to', 'size', 'cards')
 _RELATIVE_KEYS = ('floor', 'room')
-_CARD_KEYS = ('pattern', 'code', 'pose')
+_CARD_KEYS = ('pattern', 'code', 'pose', 'std_dev')
+_STD_DEV_KEYS = ('position_m', 'rotation_deg')
 _POSE_KEYS = ('position',) + ORIENTATIONS
 # tf2 frame ids: no spaces, no leading slash (ROS 2 rejects it).
 _FRAME_RE = re.compile(r'^[A-Za-z0-9_][A-Za-z0-9_./-]*$')
@@ -76,12 +77,26 @@ def wall_card_rotation(facing_deg: float) -> np.ndarray:
     return np.column_stack([np.cross(y_axis, z_axis), y_axis, z_axis])
 
 
+@dataclass(frozen=True)
+class CardStdDev:
+    """
+    How well a card's pose is known (a survey's result): standard deviations about the room's axes.
+
+    ``position_m``: of the card's centre along room x, y, z (metres);
+    ``rotation_deg``: of small rotations about room x, y, z (degrees).
+    """
+
+    position_m: Tuple[float, float, float]
+    rotation_deg: Tuple[float, float, float]
+
+
 @dataclass(frozen=True, eq=False)
 class MappedCard:
     """
     One card of the building map.
 
     ``eq=False``: the poses hold numpy arrays, so cards compare by identity.
+    ``std_dev``: the card pose's uncertainty when the map gives one.
     """
 
     ids: Ids
@@ -89,6 +104,7 @@ class MappedCard:
     room_frame: str
     T_room_card: Pose
     T_building_card: Pose
+    std_dev: Optional[CardStdDev] = None
 
     def label(self) -> str:
         """Return ``floor F room R card P``, as the error messages name it."""
@@ -308,8 +324,30 @@ def _card(source: str, floor: int, room: int, index: int, data: Any, pattern: Pa
                 f'(expected {expected}; {given} is '
                 f'{_card_label(read.floor, read.room, read.pattern)})')
     T_room_card = _pose(f'{where}: pose', data['pose'])
+    std_dev = None
+    if data.get('std_dev') is not None:
+        std_dev = _std_dev(f'{where}: std_dev', data['std_dev'])
     return MappedCard(Ids(floor, room, number), expected, room_frame, T_room_card,
-                      T_building_room @ T_room_card)
+                      T_building_room @ T_room_card, std_dev)
+
+
+def _std_dev(where: str, data: Any) -> CardStdDev:
+    """Read ``{position_m: s | [sx, sy, sz], rotation_deg: s | [sx, sy, sz]}`` (>= 0)."""
+    _check_keys(where, data, _STD_DEV_KEYS)
+    if not data:
+        raise ConfigError(f'{where}: give position_m, rotation_deg or both')
+    values = []
+    for key in _STD_DEV_KEYS:
+        value = data.get(key, 0.0)
+        message = f'{key} must be a number or [x, y, z] (standard deviations about the room axes)'
+        if isinstance(value, list):
+            triple = _numbers(where, key, value, 3, message)
+        else:
+            triple = [_number(where, key, value, message)] * 3
+        if not all(math.isfinite(v) and v >= 0.0 for v in triple):
+            raise ConfigError(f'{where}: {key} must be finite and >= 0, got {value!r}')
+        values.append(tuple(float(v) for v in triple))
+    return CardStdDev(*values)
 
 
 def _pose(where: str, data: Any) -> Pose:

@@ -6,7 +6,9 @@ only if: its pose and covariance are finite and the covariance is positive
 definite and not huge; the camera is in front of the card, at a plausible
 distance and angle; the base is on the floor of its room (height, roll and
 pitch within bounds) and inside the room's footprint from the building map
-(plus a margin), or inside the building when the room has no size. The
+(plus a margin) or, with ``footprint='adjacent'`` (a robot driving through
+the building sees cards through doors), in a room next to it; inside the
+building when the room has no size. The
 **continuity gate** (:meth:`FixGates.check_continuity`) compares the fix
 with the last one returned: a jump beyond what the robot's motion allows
 (its odometry when given, else a maximum speed and yaw rate), by
@@ -32,6 +34,7 @@ from typing import Dict, NamedTuple, Optional, Tuple
 import numpy as np
 
 from .building import BuildingMap, Room
+from .footprints import footprints, neighbours
 from ..errors import ConfigError
 from ..vision.geometry import Pose, rotation_vector, skew
 
@@ -48,7 +51,9 @@ REASONS = (
     'jump',                      # not continuous with the last fix: held until confirmed
     'unconfirmed_first',         # the first fix (or the first after a reset): held likewise
 )
-FOOTPRINTS = ('room', 'building', 'off')
+FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
+# Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.
+ADJACENT_MIN_LENGTH_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -63,22 +68,29 @@ class GateParameters:
     # Covariance: the largest position standard deviation a fix may have.
     max_position_sigma_m: float = 1.0
     # The camera in front of the card: distance and angle off the card's normal.
+    # Beyond 75 deg the detector's dot centres are biased well beyond their
+    # noise (errors of 10-27 cm at 6 m, 2-4 times the covariance's, measured
+    # by bench --drive-core); a card so oblique is not trusted.
     min_camera_distance_m: float = 0.3
     max_camera_distance_m: float = 20.0
-    max_view_angle_deg: float = 85.0
+    max_view_angle_deg: float = 75.0
     # The base on its room's floor (room frame z), not tipped over.
     min_base_height_m: float = -0.5
     max_base_height_m: float = 0.5
     max_roll_deg: float = 10.0
     max_pitch_deg: float = 10.0
     # 'room': inside the card's room (its size in the map) plus the margin,
-    # or inside the building's box when the room has no size; 'building':
-    # inside the box of every sized room; 'off'.
-    footprint: str = 'room'
+    # or inside the building's box when the room has no size; 'adjacent':
+    # the card's room or a room next to it (their footprints within
+    # adjacent_gap_m along at least 0.5 m: a card seen through a door), for
+    # a robot driving through the building; 'building': inside the box of
+    # every sized room; 'off'.
+    footprint: str = 'adjacent'
     footprint_margin_m: float = 0.5
     # Judge each fix against the last one (off: every image stands alone, as
     # for unrelated still images; the static gates still apply).
     continuity: bool = True
+    adjacent_gap_m: float = 0.5
     # Continuity, without odometry: how fast the base can move and turn.
     max_speed_m_s: float = 1.0
     max_yaw_rate_deg_s: float = 90.0
@@ -182,6 +194,9 @@ class FixGates:
         self._accepted: Optional[_Fix] = None
         self._pending: Optional[_Fix] = None
         self._building_box = self._box_of_rooms()
+        self._footprints = footprints(building)
+        self._adjacent = neighbours(self._footprints, self.parameters.adjacent_gap_m,
+                                    ADJACENT_MIN_LENGTH_M)
 
     # Counts and state -------------------------------------------------------------
 
@@ -276,14 +291,21 @@ class FixGates:
         p = self.parameters
         if p.footprint == 'off':
             return None
-        if p.footprint == 'room' and room is not None and room.size is not None:
+        if p.footprint in ('room', 'adjacent') and room is not None and room.size is not None:
             x, y = (room.T_building_room.inverse().apply(T_building_base.t[None])[0, :2])
             length, width = room.size[0], room.size[1]
             m = p.footprint_margin_m
             if -m <= x <= length + m and -m <= y <= width + m:
                 return None
+            if p.footprint == 'adjacent':
+                xy = T_building_base.t[None, :2]
+                for key in self._adjacent.get((room.floor, room.room), ()):
+                    other = self._footprints[key]
+                    if other.on_floor(float(T_building_base.t[2])) and other.contains(xy)[0]:
+                        return None
+            where = ' or a room next to it' if p.footprint == 'adjacent' else ''
             return Rejection('outside_footprint', f'base at ({x:.2f}, {y:.2f}) m is outside '
-                             f'{room.frame} ({length:g} x {width:g} m, margin {m:g} m)')
+                             f'{room.frame} ({length:g} x {width:g} m, margin {m:g} m){where}')
         if self._building_box is None:
             return None                   # no room has a size: nothing to check against
         low, high = self._building_box
@@ -409,17 +431,31 @@ def _shrink(vector: np.ndarray, allowance: float) -> np.ndarray:
     return vector * (1.0 - allowance / norm)
 
 
-def _predict(before: _Fix, odometry: BaseMotion) -> Tuple[Pose, np.ndarray]:
-    """Return the pose odometry predicts from ``before`` and its covariance (first order)."""
-    motion = odometry.T_start_end
-    predicted = before.T @ motion
-    R = before.T.R
-    # The last fix's rotation error swings the odometry's translation.
-    J_before = np.eye(6)
-    J_before[:3, 3:] = -skew(R @ motion.t)
+def compose_with_motion(T_frame_start: Pose, covariance: np.ndarray, motion: Pose,
+                        motion_covariance: np.ndarray) -> Tuple[Pose, np.ndarray]:
+    """
+    Return ``T_frame_start @ motion`` and its covariance (first order).
+
+    ``covariance``: 6x6 of ``T_frame_start`` (position, then a small
+    rotation about the frame's axes); ``motion_covariance``: 6x6 of the
+    motion in the start base frame (translation, then rotation about the
+    start base's axes), as :class:`BaseMotion` gives it. The two are taken
+    as independent: a pose and the odometry measured after it.
+    """
+    predicted = T_frame_start @ motion
+    R = T_frame_start.R
+    # The start's rotation error swings the motion's translation.
+    J_start = np.eye(6)
+    J_start[:3, 3:] = -skew(R @ motion.t)
     J_motion = np.zeros((6, 6))
     J_motion[:3, :3] = R
     J_motion[3:, 3:] = R
-    cov = (J_before @ before.covariance @ J_before.T
-           + J_motion @ np.asarray(odometry.covariance, dtype=float) @ J_motion.T)
+    cov = (J_start @ np.asarray(covariance, dtype=float) @ J_start.T
+           + J_motion @ np.asarray(motion_covariance, dtype=float) @ J_motion.T)
     return predicted, 0.5 * (cov + cov.T)
+
+
+def _predict(before: _Fix, odometry: BaseMotion) -> Tuple[Pose, np.ndarray]:
+    """Return the pose odometry predicts from ``before`` and its covariance (first order)."""
+    return compose_with_motion(before.T, before.covariance, odometry.T_start_end,
+                               odometry.covariance)

@@ -246,13 +246,13 @@ def covariance_to_base(covariance: np.ndarray, T_room_card: Pose, T_camera_card:
     out = J @ cov @ J.T
     sigmas = np.asarray(angle_sigma_rad, dtype=float).reshape(2)
     if np.any(sigmas > 0.0):
-        Ja = _angle_jacobian(T_room_card, T_camera_card, head, pan, tilt)
+        Ja = angle_jacobian(T_room_card, T_camera_card, head, pan, tilt)
         out = out + Ja @ np.diag(sigmas ** 2) @ Ja.T
     return 0.5 * (out + out.T)
 
 
-def _angle_jacobian(T_room_card: Pose, T_camera_card: Pose, head: HeadGeometry,
-                    pan: float, tilt: float, step: float = 1e-6) -> np.ndarray:
+def angle_jacobian(T_room_card: Pose, T_camera_card: Pose, head: HeadGeometry,
+                   pan: float, tilt: float, step: float = 1e-6) -> np.ndarray:
     """Return d(base position, rotation about room axes)/d(pan, tilt) (central differences)."""
     J = np.zeros((6, 2))
     for k in range(2):
@@ -266,6 +266,35 @@ def _angle_jacobian(T_room_card: Pose, T_camera_card: Pose, head: HeadGeometry,
         J[3:, k] = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0],
                              dR[1, 0] - dR[0, 1]]) / (4.0 * step)
     return J
+
+
+@dataclass(frozen=True)
+class HeadMotion:
+    """
+    The head's angles at an image's stamp and how far to trust them.
+
+    ``pan``, ``tilt``: what :meth:`JointStateBuffer.at` returns (rad).
+    ``pan_rate``, ``tilt_rate``: the head's angular rates there (rad/s),
+    from the bracketing samples (the last two when holding). ``rate_change``:
+    how much the rates changed across the samples around the stamp (rad/s,
+    pan and tilt): a head whose speed changed between two samples is not
+    where a straight line between them puts it. ``interval_s``: the time
+    between the bracketing samples. ``hold_s``: how long after the last
+    sample the stamp lies (the angles are held that long; 0 when bracketed).
+    """
+
+    pan: float
+    tilt: float
+    pan_rate: float = 0.0
+    tilt_rate: float = 0.0
+    rate_change: Tuple[float, float] = (0.0, 0.0)
+    interval_s: float = 0.0
+    hold_s: float = 0.0
+
+    @staticmethod
+    def still(pan: float, tilt: float) -> 'HeadMotion':
+        """Return the motion of a head standing at (pan, tilt) (fixed angles)."""
+        return HeadMotion(float(pan), float(tilt))
 
 
 class JointStateBuffer:
@@ -347,6 +376,43 @@ class JointStateBuffer:
             if keep > 0:
                 del self._stamps[:keep]
                 del self._angles[:keep]
+
+    def motion_at(self, stamp_s: float) -> HeadMotion:
+        """
+        Return the angles at ``stamp_s`` (as :meth:`at`) with the head's rates around it.
+
+        HeadStateError when the angles are not known (as :meth:`at`).
+        """
+        pan, tilt = self.at(stamp_s)
+        stamp_s = float(stamp_s)
+        with self._lock:
+            stamps, angles = list(self._stamps), list(self._angles)
+        n = len(stamps)
+        if n < 2:
+            return HeadMotion(pan, tilt, hold_s=max(0.0, stamp_s - stamps[-1]))
+        # i: the sample after the stamp (the last one when holding).
+        i = min(max(bisect.bisect_right(stamps, stamp_s), 1), n - 1)
+
+        def rate(k: int) -> Optional[np.ndarray]:
+            """Return the rates over (k - 1, k), None outside the samples or across a gap."""
+            if k < 1 or k >= n:
+                return None
+            dt = stamps[k] - stamps[k - 1]
+            if not 0.0 < dt <= self.max_gap_s:
+                return None
+            return (np.asarray(angles[k]) - np.asarray(angles[k - 1])) / dt
+
+        current = rate(i)
+        if current is None:
+            current = np.zeros(2)
+        change = np.zeros(2)
+        for other in (rate(i - 1), rate(i + 1)):
+            if other is not None:
+                change = np.maximum(change, np.abs(other - current))
+        hold = max(0.0, stamp_s - stamps[-1])
+        return HeadMotion(pan, tilt, float(current[0]), float(current[1]),
+                          (float(change[0]), float(change[1])),
+                          float(stamps[i] - stamps[i - 1]), hold)
 
     def at(self, stamp_s: float) -> Tuple[float, float]:
         """Return (pan, tilt) at ``stamp_s``; HeadStateError when they are not known."""

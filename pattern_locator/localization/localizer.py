@@ -10,7 +10,13 @@ gates (:mod:`.gates`: finite, positive definite, camera in front of the
 card, base on the floor of its room); several cards in view: the paper's
 rule (the biggest complete card) or a covariance-weighted fusion of them.
 Given the image's stamp, the fix must also be continuous with the last one
-(a jump waits for a second agreeing image). A :class:`FrameResult` without
+(a jump waits for a second agreeing image; odometry since the last fix,
+``odom.OdomBuffer.motion_between``, says how far the robot can have moved).
+A fix's covariance is :mod:`.uncertainty`'s model, term by term
+(``RobotFix.uncertainty``): the image's, the head's angles at the image's
+stamp (pass ``head_motion`` from ``JointStateBuffer.motion_at`` and the
+base's twist), the map's own; ``uncertainty=None`` gives the estimator's
+Fisher covariance alone, as before issue 12. A :class:`FrameResult` without
 a fix says why (``no_fix_reason``) and which gates refused what
 (``rejections``); :meth:`RobotLocalizer.rejection_counts` counts them.
 """
@@ -23,7 +29,9 @@ import numpy as np
 
 from .building import BuildingMap, MappedCard
 from .gates import BaseMotion, FixGates, GateParameters, Rejection
-from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, up_in_camera
+from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, HeadMotion, up_in_camera
+from .odom import BaseTwist
+from .uncertainty import fix_covariance, FixCovariance, UncertaintyParameters
 from ..card.pattern import Ids, PatternConfig
 from ..errors import CodeError, ConfigError
 from ..vision.camera import CameraModel
@@ -50,6 +58,9 @@ class RobotFix:
     size_px: float                 # the card's apparent size (outer ring semi-axis, px)
     ambiguity: float
     cards_used: int
+    # The covariance term by term (uncertainty.TERMS), None when the
+    # estimator's own covariance is used (``uncertainty=None``) or fused.
+    uncertainty: Optional[FixCovariance] = None
 
 
 @dataclass(frozen=True)
@@ -74,7 +85,8 @@ class RobotLocalizer:
                  estimator: str = 'exact', output_frame: str = 'room',
                  fusion: str = 'biggest', min_tilt_deg: float = 0.0,
                  max_reprojection_px: float = 1.5, camera_height_sigma: float = 0.15,
-                 up_sigma_deg: float = 5.0, gates: Optional[GateParameters] = None):
+                 up_sigma_deg: float = 5.0, gates: Optional[GateParameters] = None,
+                 uncertainty: Optional[UncertaintyParameters] = UncertaintyParameters()):
         if output_frame not in OUTPUT_FRAMES:
             raise ConfigError(f'output frame must be one of {", ".join(OUTPUT_FRAMES)}, '
                               f'got {output_frame!r}')
@@ -90,6 +102,9 @@ class RobotLocalizer:
         self.camera_height_sigma = camera_height_sigma
         self.up_sigma = math.radians(up_sigma_deg)
         self.gates = FixGates(building, gates)
+        # None: the estimator's Fisher covariance alone (as before issue 12).
+        self.uncertainty = uncertainty
+        self._model_points = pattern.model_points()
         self.last_fix: Optional[RobotFix] = None
 
     def rejection_counts(self) -> Dict[str, int]:
@@ -107,8 +122,9 @@ class RobotLocalizer:
         self.last_fix = None
 
     def process(self, image: np.ndarray, camera: CameraModel, pan: float, tilt: float,
-                stamp_s: Optional[float] = None, odometry: Optional[BaseMotion] = None
-                ) -> FrameResult:
+                stamp_s: Optional[float] = None, odometry: Optional[BaseMotion] = None,
+                head_motion: Optional[HeadMotion] = None,
+                base_twist: Optional[BaseTwist] = None) -> FrameResult:
         """
         Locate the robot in one image taken with the head at ``pan``, ``tilt`` (rad).
 
@@ -117,7 +133,15 @@ class RobotLocalizer:
         the static gates is returned. ``odometry``: the base's motion since
         :attr:`last_fix_stamp`, for the continuity gate (else the maximum
         speed and yaw rate of the gate parameters bound the motion).
+        ``head_motion``: the head's rates at the stamp
+        (``JointStateBuffer.motion_at``; its angles are ``pan``, ``tilt``);
+        ``base_twist``: the base's (``OdomBuffer.twist_at``). Both feed the
+        covariance (:mod:`.uncertainty`); without them the head and the base
+        are taken as still.
         """
+        motion = HeadMotion.still(pan, tilt) if head_motion is None else HeadMotion(
+            float(pan), float(tilt), head_motion.pan_rate, head_motion.tilt_rate,
+            head_motion.rate_change, head_motion.interval_s, head_motion.hold_s)
         detections = sorted(self.locator.detector.detect(image, camera),
                             key=lambda d: -d.size_px)
         problems: List[str] = []
@@ -147,7 +171,7 @@ class RobotLocalizer:
                                 f'{located.reprojection_rms_px:.2f} px above the limit '
                                 f'{self.max_reprojection_px:.2f} px')
                 continue
-            fix, rejection = self._fix(det, mapped, located, pan, tilt)
+            fix, rejection = self._fix(det, mapped, located, camera, motion, base_twist)
             if rejection is not None:
                 problems.append(f'card {det.code}: {rejection.message}')
                 rejections.append(rejection.reason)
@@ -204,9 +228,10 @@ class RobotLocalizer:
                          height_sigma=self.camera_height_sigma,
                          previous_camera_in_pattern=previous)
 
-    def _fix(self, det, mapped: MappedCard, located, pan: float, tilt: float
-             ) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
+    def _fix(self, det, mapped: MappedCard, located, camera: CameraModel, motion: HeadMotion,
+             twist: Optional[BaseTwist]) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
         """Return the base's fix from one card and why the gates refuse it (or None)."""
+        pan, tilt = motion.pan, motion.tilt
         T_camera_card = located.T_camera_pattern
         if self.output_frame == 'room':
             T_frame_card, frame_id = mapped.T_room_card, mapped.room_frame
@@ -214,7 +239,19 @@ class RobotLocalizer:
             T_frame_card, frame_id = mapped.T_building_card, self.building.frame
         T_frame_base = base_pose_from_camera(T_frame_card, T_camera_card, self.head, pan, tilt)
         covariance = None
-        if located.covariance is not None and np.shape(located.covariance) == (6, 6):
+        terms = None
+        if self.uncertainty is not None and located.reprojection_rms_px is not None:
+            seen = ~np.isnan(np.asarray(det.points_px, dtype=float)).any(axis=1)
+            with np.errstate(all='ignore'):
+                try:
+                    terms = fix_covariance(self.uncertainty, camera, self._model_points, seen,
+                                           located.reprojection_rms_px, T_camera_card,
+                                           T_frame_card, T_frame_base, mapped, self.head,
+                                           motion, twist)
+                    covariance = terms.total
+                except (ValueError, np.linalg.LinAlgError):
+                    covariance = None      # the covariance gate says so
+        elif located.covariance is not None and np.shape(located.covariance) == (6, 6):
             with np.errstate(all='ignore'):
                 covariance = covariance_to_base(located.covariance, T_frame_card,
                                                 T_camera_card, self.head, pan, tilt)
@@ -224,7 +261,8 @@ class RobotLocalizer:
             return None, rejection
         pan_to, tilt_to = _head_motion_from_pose(T_camera_card)
         return RobotFix(det.ids, frame_id, T_frame_base, covariance, T_camera_card, pan_to,
-                        tilt_to, det.size_px, float(located.ambiguity or math.inf), 1), None
+                        tilt_to, det.size_px, float(located.ambiguity or math.inf), 1,
+                        terms), None
 
 
 def _head_motion(camera: CameraModel, centre_px: np.ndarray) -> Tuple[float, float]:

@@ -61,7 +61,7 @@ from .ros_helpers import (all_finite, describe_values, fill_pose, Param, Paramet
 from ..card.pattern import load_pattern_config
 from ..errors import PatternLocatorError
 from ..localization.building import load_building
-from ..localization.gates import GateParameters
+from ..localization.gates import FOOTPRINTS, GateParameters
 from ..localization.head import angles_from_joint_state, HeadGeometry, JointStateBuffer
 from ..localization.localizer import FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotLocalizer
 from ..vision.camera import CameraModel
@@ -133,9 +133,12 @@ _GATE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
     'max_base_height_m': ("base above its room's floor by more: refused (m)", -100.0, 100.0),
     'max_roll_deg': ('base rolled more than this: refused (deg)', 0.0, 180.0),
     'max_pitch_deg': ('base pitched more than this: refused (deg)', 0.0, 180.0),
-    'footprint': ("where the base may be: inside the card's room, the building, or anywhere",
-                  ('room', 'building', 'off'), None),
+    'footprint': ("where the base may be: inside the card's room, that room or one next to "
+                  'it (a card seen through a door), the building, or anywhere',
+                  FOOTPRINTS, None),
     'footprint_margin_m': ('margin around the footprint (m)', 0.0, 100.0),
+    'adjacent_gap_m': ('rooms whose footprints are this close (along at least 0.5 m) are '
+                       "next to each other, for footprint 'adjacent' (m)", 0.0, 10.0),
     'continuity': ('judge each fix against the last one (false: every image stands alone, '
                    'as for unrelated still images)', None, None),
     'max_speed_m_s': ('fastest the base moves, without odometry (m/s)', 0.01, 100.0),

@@ -318,7 +318,7 @@ BAD = {
         "floor 1: unknown key 'room' (did you mean 'rooms'?"),
     'card not a mapping': (
         _yaml('- 2'), 'floor 1 room 3 cards[0]: expected a mapping with keys pattern, code, '
-                      'pose; got 2'),
+                      'pose, std_dev; got 2'),
     'missing floors': ('building: {frame: building}\n', "missing 'floors'"),
     'no floors': ('floors: []\n', 'floors must be a non-empty list, got an empty list'),
     'top level a list': ('- floor: 1\n', 'expected a mapping with "floors" at the top level'),

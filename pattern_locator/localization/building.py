@@ -8,7 +8,10 @@ T_room_card``. A card's frame is the pattern frame: origin at the centre dot,
 x right, y up (towards point 1), z out of the wall into the room.
 
 The file format is documented at the top of the shipped
-``config/building.yaml``. Loading checks everything a typo could break and
+``config/building.yaml``. A card may also carry its standard deviations, as
+a surveyed map (``pattern-locator survey``) writes them: ``std_dev:
+{position_m: [x, y, z], rotation_deg: [x, y, z]}`` about the room frame's
+axes (either part optional). Loading checks everything a typo could break and
 raises :class:`~.errors.ConfigError` with one line naming the file and the
 exact place (``floor 1 room 3 card 2: ...``).
 """
@@ -39,6 +42,7 @@ _FLOOR_KEYS = ('floor', 'name', 'rooms')
 _ROOM_KEYS = ('room', 'name', 'frame', 'pose', 'relative_to', 'size', 'cards')
 _RELATIVE_KEYS = ('floor', 'room')
 _CARD_KEYS = ('pattern', 'code', 'pose')
+_STD_DEV_KEYS = ('position_m', 'rotation_deg')
 _POSE_KEYS = ('position',) + ORIENTATIONS
 # tf2 frame ids: no spaces, no leading slash (ROS 2 rejects it).
 _FRAME_RE = re.compile(r'^[A-Za-z0-9_][A-Za-z0-9_./-]*$')
@@ -86,6 +90,9 @@ class MappedCard:
     room_frame: str
     T_room_card: Pose
     T_building_card: Pose
+    # Optional standard deviations about the room's axes (a surveyed map gives them).
+    position_sd_m: Optional[Tuple[float, float, float]] = None
+    rotation_sd_deg: Optional[Tuple[float, float, float]] = None
 
     def label(self) -> str:
         """Return ``floor F room R card P``, as the error messages name it."""
@@ -307,7 +314,7 @@ def _card(source: str, floor: int, room: int, index: int, data: Any, pattern: Pa
     number = _number_key(f'{source}: floor {floor} room {room} cards[{index}]', data,
                          _CARD_KEYS, 'pattern')
     where = f'{source}: {_card_label(floor, room, number)}'
-    _check_keys(where, data, _CARD_KEYS, required=('pose',))
+    _check_keys(where, data, _CARD_KEYS + ('std_dev',), required=('pose',))
     _check_range(where, ranges, 'pattern', number)
     expected = pattern.encode(floor, room, number)
     if data.get('code') is not None:
@@ -322,8 +329,19 @@ def _card(source: str, floor: int, room: int, index: int, data: Any, pattern: Pa
                 f'(expected {expected}; {given} is '
                 f'{_card_label(read.floor, read.room, read.pattern)})')
     T_room_card = _pose(f'{where}: pose', data['pose'])
+    sd = {}
+    if data.get('std_dev') is not None:
+        _check_keys(f'{where}: std_dev', data['std_dev'], _STD_DEV_KEYS)
+        for key, value in data['std_dev'].items():
+            values = _numbers(f'{where}: std_dev', key, value, 3,
+                              f'{key} must be three numbers >= 0')
+            if min(values) < 0.0:
+                raise ConfigError(f'{where}: std_dev: {key} must be three numbers >= 0, got '
+                                  f'{value!r}')
+            sd[{'position_m': 'position_sd_m', 'rotation_deg': 'rotation_sd_deg'}[key]] = \
+                tuple(values)
     return MappedCard(Ids(floor, room, number), expected, room_frame, T_room_card,
-                      T_building_room @ T_room_card)
+                      T_building_room @ T_room_card, **sd)
 
 
 def _pose(where: str, data: Any) -> Pose:

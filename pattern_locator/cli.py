@@ -116,19 +116,19 @@ def _parser() -> argparse.ArgumentParser:
     survey.add_argument('--camera-info-topic', help='default: /camera/camera_info, or the '
                                                     'only one')
     survey.add_argument('--odom-topic', help='default: /odom, or the only Odometry topic')
-    survey.add_argument('--joint-states-topic', help='the pan/tilt head\'s joint states '
+    survey.add_argument('--joint-states-topic', help="the pan/tilt head's joint states "
                                                      '(default: /camera/joint_states)')
     survey.add_argument('--jobs', type=int, help='detection processes (default: all cores)')
     survey.add_argument('--camera-mount', type=float, nargs=6,
                         metavar=('X', 'Y', 'Z', 'ROLL', 'PITCH', 'YAW'),
-                        help='the camera optical frame on the odometry\'s base: metres and '
+                        help="the camera optical frame on the odometry's base: metres and "
                              'degrees (R = Rz(yaw) Ry(pitch) Rx(roll)); used when the bag has '
                              'no /tf_static chain')
     survey.add_argument('--no-odometry', action='store_true', help='ignore the odometry')
     survey.add_argument('--no-vertical-prior', action='store_true',
                         help='do not assume the cards hang vertical')
     survey.add_argument('--card-height', type=float, metavar='M',
-                        help='the cards\' nominal height above the floor (needs odometry)')
+                        help="the cards' nominal height above the floor (needs odometry)")
     survey.set_defaults(handler=_survey)
 
     bag = sub.add_parser('bag', help='record a simulated route, or play a bag into ROS',

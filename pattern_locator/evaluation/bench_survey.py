@@ -28,7 +28,7 @@ pinned to one CPU); and the fraction of cards whose true position error lies
 inside their 95 % ellipsoid (chi-square, 3 dof).
 """
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 import multiprocessing
 import os
@@ -47,7 +47,7 @@ from ..survey.record import default_survey_camera
 from ..survey.sightings import Sighting
 from ..survey.simulate import (calibrate, sighting_nees, SightingModel, simulate_sightings,
                                view_angle_deg)
-from ..vision.geometry import Pose, rotation_angle
+from ..vision.geometry import rotation_angle
 
 CHI2_3_95 = 7.815
 
@@ -194,8 +194,8 @@ def _row(name: str, e: MapErrors, frames: int) -> str:
             f'{1000.0 * e.optimise_cpu_s / frames:.2f} |')
 
 
-HEADER = ('| walk | absolute RMS / max (mm) | abs. orientation RMS (deg) | relative RMS / max (mm) '
-          '| rel. orientation RMS (deg) | mapped / seen twice | inside 95 % ellipse | '
+HEADER = ('| walk | absolute RMS / max (mm) | abs. orientation RMS (deg) | relative RMS / max '
+          '(mm) | rel. orientation RMS (deg) | mapped / seen twice | inside 95 % ellipse | '
           'optimisation CPU s per 1000 frames |\n|---|---|---|---|---|---|---|---|')
 
 
@@ -272,7 +272,7 @@ def run_survey_bench(quick: bool = False, seed: int = 1, floor_seeds: Optional[i
     print()
     print('NEES of the rendered sightings (mean e^T Sigma^-1 e / 6 over (camera position, '
           'rotation) against the truth; rows: distance 0-3, 3-5, 5+ m; columns: view angle '
-          '0-30, 30-50, 50+ deg), used to draw the floor\'s sighting errors:')
+          "0-30, 30-50, 50+ deg), used to draw the floor's sighting errors:")
     for row in table:
         print('  ' + '  '.join(f'{v:6.2f}' for v in row))
     print(f'  ({len(rows)} rendered sightings; overall mean '

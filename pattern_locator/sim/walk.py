@@ -169,8 +169,8 @@ def hang_cards(planned: Sequence[Tuple[Ids, Code, Pose]], seed: int,
         a = rng.uniform(0.0, 2.0 * math.pi)
         shift = np.array([r * math.cos(a), r * math.sin(a),
                           rng.uniform(-wall_offset_m, wall_offset_m)])
-        roll, yaw, tilt = (math.radians(rng.uniform(-m, m)) for m in (roll_deg, yaw_deg,
-                                                                        tilt_deg))
+        roll, yaw, tilt = (math.radians(rng.uniform(-m, m))
+                           for m in (roll_deg, yaw_deg, tilt_deg))
         # In the card's own axes: z the normal (roll), y up (yaw), x along the wall (tilt).
         turn = rodrigues(np.array([0.0, yaw, 0.0])) @ rodrigues(np.array([tilt, 0.0, 0.0])) \
             @ rodrigues(np.array([0.0, 0.0, roll]))
@@ -451,8 +451,8 @@ def drift_odometry(walk: Walk, drift: OdometryDrift = OdometryDrift(), seed: int
         noise = math.sqrt(d)
         dx = (1.0 + drift.scale_error) * dx + rng.normal(0.0, drift.sigma_xy_per_sqrt_m * noise)
         dy = (1.0 + drift.scale_error) * dy + rng.normal(0.0, drift.sigma_xy_per_sqrt_m * noise)
-        turn += drift.yaw_bias_rad_per_m * d + rng.normal(0.0, drift.sigma_yaw_per_sqrt_m
-                                                         * noise)
+        turn += drift.yaw_bias_rad_per_m * d + rng.normal(
+            0.0, drift.sigma_yaw_per_sqrt_m * noise)
         c, s = math.cos(yaw), math.sin(yaw)
         x, y = x + c * dx - s * dy, y + s * dx + c * dy
         yaw += turn

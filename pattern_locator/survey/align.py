@@ -54,18 +54,25 @@ def robust_rigid(source: np.ndarray, target: np.ndarray, tolerance: Sequence[flo
     """
     Return a rigid fit of source to target and which points it holds (inliers).
 
-    Every pair of points proposes a fit (and every single point a shift);
-    the proposal that holds the most points within their ``tolerance`` (m)
-    wins, refitted on those. A few moved cards among many cannot tilt it.
+    Every single point proposes a shift, every pair a shift and a turn about
+    the vertical (maps are level), and seeded triples a full rigid fit; the
+    proposal that holds the most points within their ``tolerance`` (m) wins,
+    refitted on those. A few moved cards among many cannot tilt it.
     """
     source = np.asarray(source, dtype=float).reshape(-1, 3)
     target = np.asarray(target, dtype=float).reshape(-1, 3)
     tol = np.asarray(tolerance, dtype=float).reshape(-1)
     n = len(source)
     best, best_count, best_cost = None, -1, np.inf
+    rng = np.random.default_rng(0)
     proposals = [[i] for i in range(n)] + [[i, j] for i in range(n) for j in range(i + 1, n)]
-    for subset in proposals[:2000]:
-        if len(subset) == 2:
+    proposals = proposals[:2000]
+    if n >= 3:
+        proposals += [list(rng.choice(n, 3, replace=False)) for _ in range(500)]
+    for subset in proposals:
+        if len(subset) == 3:
+            T, _ = fit_transform(source[subset], target[subset])
+        elif len(subset) == 2:
             T = _two_point(source[subset], target[subset])
         else:
             T = Pose(np.eye(3), target[subset[0]] - source[subset[0]])

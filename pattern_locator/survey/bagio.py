@@ -46,7 +46,7 @@ _TYPESTORE = None
 
 
 def typestore():
-    """Return the ROS 2 Jazzy type store (built once per process)."""
+    """Build the ROS 2 Jazzy type store once per process and return it."""
     global _TYPESTORE
     if _TYPESTORE is None:
         _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -302,11 +302,11 @@ def scan_bag(path, topics: SurveyTopics = SurveyTopics()) -> BagData:
     finally:
         reader.close()
     order = np.argsort(info_stamps, kind='stable')
-    data = dict(path=str(path), image_topic=image, info_topic=info, odom_topic=None,
-                joints_topic=None, n_images=int(counts[image]),
-                info_stamps_ns=np.asarray(info_stamps, dtype=np.int64)[order],
-                cameras=tuple(cameras[i] for i in order), tf_static=tf_static,
-                camera_frame=camera_frame.lstrip('/'))
+    data = {'path': str(path), 'image_topic': image, 'info_topic': info, 'odom_topic': None,
+            'joints_topic': None, 'n_images': int(counts[image]),
+            'info_stamps_ns': np.asarray(info_stamps, dtype=np.int64)[order],
+            'cameras': tuple(cameras[i] for i in order), 'tf_static': tf_static,
+            'camera_frame': camera_frame.lstrip('/')}
     if odom and odom_stamps:
         stamps, poses = _sorted_unique(odom_stamps, odom_poses)
         data.update(odom_topic=odom, odom_stamps_ns=stamps, odom_poses=poses,

@@ -1,5 +1,5 @@
 """
-``pattern-locator survey --check building.yaml BAG``: does the map still agree with the building?
+``pattern-locator survey --check building.yaml BAG``: does the map still agree with the walk.
 
 The bag is surveyed on its own (no anchors), then laid onto the map by the
 rigid transform that fits the most cards (:func:`.align.robust_rigid`), so
@@ -55,14 +55,25 @@ def check_map(map_path: str, bag_paths: Sequence[str], topics: SurveyTopics = Su
     mapped = {c.ids.as_tuple(): c for c in building.cards()}
     common = sorted(ids for ids, c in surveyed.items() if ids in mapped and c.placed)
     out: List[CardCheck] = []
-    if len(common) < 2:
+    if len(common) < 3:
         raise ConfigError(f'survey --check: the walk placed {len(common)} card(s) of the map; '
-                          'at least two are needed to lay it onto the map')
+                          'at least three are needed to lay it onto the map and tell which '
+                          'moved')
     source = np.array([surveyed[i].T_building_card.t for i in common])
     target = np.array([mapped[i].T_building_card.t for i in common])
     sd = np.array([_position_sd(surveyed[i], mapped[i]) for i in common])
-    tolerance = np.maximum(K_SIGMA * sd, MIN_POSITION_M)
-    T, _ = robust_rigid(source, target, tolerance)
+    T, inliers = robust_rigid(source, target, np.maximum(K_SIGMA * sd, MIN_POSITION_M))
+    # A card's offset after the fit is uncertain by its position relative to the fitted
+    # cards, not to the survey's own frame: project the frame's motions out, and fit
+    # again with those tolerances until the cards held stay the same.
+    for _ in range(4):
+        position_sd = _residual_sd(run.result, common, source, inliers, mapped)
+        tolerance = np.maximum(K_SIGMA * np.array([position_sd[i] for i in common]),
+                               MIN_POSITION_M)
+        T, held = robust_rigid(source, target, tolerance)
+        if np.array_equal(held, inliers):
+            break
+        inliers = held
     for ids in sorted(set(mapped) | set(surveyed)):
         if ids not in mapped:
             out.append(CardCheck(ids, 'not in the map'))
@@ -78,11 +89,41 @@ def check_map(map_path: str, bag_paths: Sequence[str], topics: SurveyTopics = Su
         offset = moved_to - mapped[ids].T_building_card.t
         angle = math.degrees(rotation_angle(T.R @ card.T_building_card.R,
                                             mapped[ids].T_building_card.R))
-        tol_m = max(K_SIGMA * _position_sd(card, mapped[ids]), MIN_POSITION_M)
+        tol_m = max(K_SIGMA * position_sd[ids], MIN_POSITION_M)
         tol_deg = max(K_SIGMA * _angle_sd_deg(card, mapped[ids]), MIN_ANGLE_DEG)
         distance = float(np.linalg.norm(offset))
         status = 'moved' if distance > tol_m or angle > tol_deg else 'ok'
         out.append(CardCheck(ids, status, distance, angle, tol_m, tol_deg, offset))
+    return out
+
+
+def _residual_sd(result, common, source: np.ndarray, inliers: np.ndarray, mapped) -> dict:
+    """
+    Return each card's position sd after a rigid fit on the inliers.
+
+    With x the cards' positions (joint covariance S) and G the rigid motions
+    (``dx_j = t + w x p_j``), the fit's residual is ``(I - P) x`` with P the
+    least-squares projection onto G over the inliers: its covariance is
+    ``(I - P) S (I - P)^T``. The map's own ``std_dev`` adds to it.
+    """
+    n = len(common)
+    S = result.card_position_covariance(common)
+    G = np.zeros((3 * n, 6))
+    centre = source[inliers].mean(axis=0)
+    for k, p in enumerate(source - centre):
+        G[3 * k:3 * k + 3, :3] = np.eye(3)
+        G[3 * k:3 * k + 3, 3:] = -np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]],
+                                            [-p[1], p[0], 0.0]])
+    W = np.repeat(inliers.astype(float), 3)
+    P = G @ np.linalg.pinv(G.T @ (G * W[:, None])) @ (G.T * W[None, :])
+    M = np.eye(3 * n) - P
+    C = M @ S @ M.T
+    out = {}
+    for k, ids in enumerate(common):
+        var = float(np.max(np.linalg.eigvalsh(C[3 * k:3 * k + 3, 3 * k:3 * k + 3])))
+        if mapped[ids].position_sd_m is not None:
+            var += max(mapped[ids].position_sd_m) ** 2
+        out[ids] = math.sqrt(max(var, 0.0))
     return out
 
 

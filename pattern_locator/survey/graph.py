@@ -133,11 +133,17 @@ class BagMotion:
 
 @dataclass(frozen=True, eq=False)
 class SurveyResult:
-    """The optimised map and what the optimisation found out on the way."""
+    """
+    The optimised map and what the optimisation found out on the way.
+
+    ``card_position_covariance`` gives the joint covariance of several cards'
+    positions (what a comparison that removes the frame needs).
+    """
 
     cards: List[MapCard]
     frame_note: str
-    calibration: Dict[int, Tuple[float, float]]         # bag -> (scale, yaw bias rad/m)
+    # bag -> (scale, yaw bias rad/m) of the bags whose odometry was calibrated
+    calibration: Dict[int, Tuple[float, float]]
     camera_paths: Dict[int, np.ndarray]                 # bag -> (N, 3) camera positions
     residuals: np.ndarray                               # whitened sighting residual norms
     sighting_variance_factor: float
@@ -148,8 +154,19 @@ class SurveyResult:
     rounds: int
     timings: Dict[str, float] = field(default_factory=dict)
     values: Optional[gtsam.Values] = None
+    marginals: Optional[gtsam.Marginals] = None
     card_index: Dict[Tuple[int, int, int], int] = field(default_factory=dict)
     frame_keys: Dict[Tuple[int, int], int] = field(default_factory=dict)
+
+    def card_position_covariance(self, ids: Sequence[Tuple[int, int, int]]) -> np.ndarray:
+        """Return the joint (3N, 3N) covariance of cards' positions about the building axes."""
+        keys = [L(self.card_index[i]) for i in ids]
+        joint = self.marginals.jointMarginalCovariance(gtsam.KeyVector(keys)).fullMatrix()
+        n = len(keys)
+        A = np.zeros((3 * n, 6 * n))
+        for k, key in enumerate(keys):
+            A[3 * k:3 * k + 3, 6 * k + 3:6 * k + 6] = self.values.atPose3(key).rotation().matrix()
+        return A @ joint @ A.T * self.sighting_variance_factor
 
 
 # Odometry ---------------------------------------------------------------------------
@@ -192,7 +209,7 @@ class _Odometry:
     def corrected(self, scale: float, yaw_bias: float, where: np.ndarray, weights: np.ndarray
                   ) -> Tuple[np.ndarray, np.ndarray]:
         """
-        Return the corrected (R, p) at the located stamps.
+        Correct the odometry and return the heading correction and position at the stamps.
 
         Each raw step's displacement is scaled by ``1 + scale`` and turned
         about the vertical by the yaw error accumulated before it
@@ -335,7 +352,7 @@ class _Problem:
         return {pair: (Pose(R[k], t[k]), float(lengths[k])) for k, pair in enumerate(pairs)}
 
     def member_step_arrays(self, calibration: Dict[int, Tuple[float, float]]):
-        """Return (pairs (n, m), step R (N, 3, 3), step t (N, 3), lengths, bags) of later members."""
+        """Return (pairs (n, m), step R, step t, lengths, bags) of the later members."""
         pairs_all, R_all, t_all, len_all, bag_all = [], [], [], [], []
         for bag, odom in self.odometry.items():
             pairs = [(n, m) for n, (b, _) in enumerate(self.frames) if b == bag
@@ -503,8 +520,14 @@ def _pose_graph_init(problem: _Problem, gauge: Dict[int, Pose],
 
 def _fit_calibration(problem: _Problem, values: gtsam.Values,
                      calibration: Dict[int, Tuple[float, float]],
-                     noise_scale: Tuple[float, float]) -> Dict[int, Tuple[float, float]]:
-    """Return each bag's (scale, yaw bias) that best explains the optimised frame poses."""
+                     noise_scale: Tuple[float, float], fitted_bags: set
+                     ) -> Dict[int, Tuple[float, float]]:
+    """
+    Return each bag's (scale, yaw bias) that best explains the optimised frame poses.
+
+    A bag with fewer than five odometry edges keeps its calibration (and is
+    not added to ``fitted_bags``).
+    """
     out = dict(calibration)
     for bag in problem.odometry:
         numbers, _, _ = problem.corrected_arrays(bag, 0.0, 0.0)
@@ -550,6 +573,7 @@ def _fit_calibration(problem: _Problem, values: gtsam.Values,
             if abs(step[0]) < 1e-7 and abs(step[1]) < 1e-9:
                 break
         out[bag] = (float(params[0]), float(params[1]))
+        fitted_bags.add(bag)
     return out
 
 
@@ -628,6 +652,7 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
     factors: Dict[str, Optional[float]] = {}
     vce_rounds = 0
     vce_done = False
+    fitted_bags: set = set()
     while True:
         rounds += 1
         last = rounds >= options.max_rounds
@@ -661,7 +686,7 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
         # then one last round with the final weights.
         settled = True
         if problem.odometry and options.calibrate_odometry:
-            fitted = _fit_calibration(problem, values, calibration, noise_scale)
+            fitted = _fit_calibration(problem, values, calibration, noise_scale, fitted_bags)
             # Moving a frame by more than 0.1 mm per metre or heading 1e-5 rad per metre.
             moved = max((max(abs(fitted[b][0] - calibration[b][0]) / 1e-4,
                              abs(fitted[b][1] - calibration[b][1]) / 1e-5) for b in fitted),
@@ -703,7 +728,7 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
     t0 = time.perf_counter()
     residuals = np.array([float(np.linalg.norm(sighting_factors[k].whitenedError(values)))
                           for k in sighting_factors if k not in dropped])
-    variance_factor = factors['sightings'] if options.rescale_noise else 1.0
+    variance_factor = (factors.get('sightings') or 1.0) if options.rescale_noise else 1.0
     cards: List[MapCard] = []
     for j, ids in enumerate(problem.card_ids):
         if j not in init_cards:
@@ -722,12 +747,14 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
         paths.setdefault(problem.frames[n][0], []).append(T.t)
     timings['marginals_s'] = time.perf_counter() - t0
     return SurveyResult(
-        cards=cards, frame_note=frame_note, calibration=calibration,
+        cards=cards, frame_note=frame_note,
+        calibration={b: c for b, c in calibration.items() if b in fitted_bags},
         camera_paths={b: np.array(p) for b, p in paths.items()}, residuals=residuals,
         sighting_variance_factor=variance_factor,
         odometry_scale=noise_scale,
         outliers=len(dropped), used_sightings=len(sighting_factors) - len(dropped),
         frames=len(active), rounds=rounds, timings=timings, values=values,
+        marginals=marginals,
         card_index=problem.card_index,
         frame_keys={problem.frames[n]: n for n in active})
 

@@ -9,8 +9,8 @@ whitened residuals (their norm against the chi distribution with 6 degrees of
 freedom). ``report.txt`` repeats the map's notes.
 """
 
-from pathlib import Path
 import math
+from pathlib import Path
 from typing import Dict, Sequence, Tuple
 
 import numpy as np
@@ -66,7 +66,7 @@ def write_report(out_dir, run, rooms: Dict[Tuple[int, int], object], notes: Sequ
         ax.set_xlabel('building x (m)')
         ax.set_ylabel('building y (m)')
         ax.set_title(f'floor {floor}: {len(on_floor)} cards; 95 % ellipses magnified '
-                     f'x{magnify:g}; arrows: the cards\' facing; squares: anchors')
+                     f"x{magnify:g}; arrows: the cards' facing; squares: anchors")
         if run.result.camera_paths:
             ax.legend(fontsize=7, loc='best')
         path = out / f'floor_{floor}.png'

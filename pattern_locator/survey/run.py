@@ -52,9 +52,9 @@ def motions_of(bags: Sequence[BagData], mounts: Sequence[Mount],
                     for frame, stamp in frames.get(b, {}).items()}
         kwargs = {}
         if bag.odom_stamps_ns is not None and len(bag.odom_stamps_ns) > 1:
-            kwargs = dict(odom_stamps_ns=bag.odom_stamps_ns,
-                          odom_R=np.array([T.R for T in bag.odom_poses]),
-                          odom_p=np.array([T.t for T in bag.odom_poses]))
+            kwargs = {'odom_stamps_ns': bag.odom_stamps_ns,
+                      'odom_R': np.array([T.R for T in bag.odom_poses]),
+                      'odom_p': np.array([T.t for T in bag.odom_poses])}
         out.append(BagMotion(bag.path, mount.source, mount_of, **kwargs))
     return out
 
@@ -124,14 +124,19 @@ def _notes(run: SurveyRun, bag_paths: Sequence[str], rooms) -> Tuple[List[str], 
     """Return the map's header and footer comment lines (also printed)."""
     result, stats = run.result, run.detection
     header = ['Surveyed by pattern-locator survey ' + ' '.join(str(p) for p in bag_paths),
-              'Poses in metres and degrees; std_dev about each room\'s axes.']
+              "Poses in metres and degrees; std_dev about each room's axes."]
     for bag, mount in zip(run.bags, run.mounts):
         odom = f'odometry {bag.odom_topic}' if bag.odom_topic else 'no odometry'
         header.append(f'{bag.path}: {bag.n_images} images on {bag.image_topic}, {odom}, '
                       f'camera mount from {mount.source}')
-    for b, (scale, bias) in sorted(result.calibration.items()):
-        header.append(f'{run.bags[b].path}: odometry scale error {-scale / (1 + scale):+.2%}'
-                      f', yaw bias {-math.degrees(bias):+.3f} deg/m (corrected)')
+    for b, bag in enumerate(run.bags):
+        if b in result.calibration:
+            scale, bias = result.calibration[b]
+            header.append(f'{bag.path}: odometry scale error {-scale / (1 + scale):+.2%}, '
+                          f'yaw bias {-math.degrees(bias):+.3f} deg/m (corrected)')
+        elif bag.odom_topic:
+            header.append(f'{bag.path}: odometry calibration not estimated (too little '
+                          'odometry between sightings)')
     header.append(f'detection: {stats.frames} frames, {stats.sightings} sightings in '
                   f'{stats.frames_with_cards} frames, {stats.wall_s:.1f} s on {stats.jobs} '
                   f'process(es)' + (f'; {stats.bad_frames} frames unusable '
@@ -141,7 +146,7 @@ def _notes(run: SurveyRun, bag_paths: Sequence[str], rooms) -> Tuple[List[str], 
                   f'{result.rounds} rounds, {run.optimise_cpu_s:.1f} s CPU')
     header.append(result.frame_note)
     anchored = sorted(k for k, r in rooms.items() if r.source == 'anchors')
-    header.append('room frames: ' + ('on each room\'s lowest-numbered placed card (upright)'
+    header.append('room frames: ' + ("on each room's lowest-numbered placed card (upright)"
                                      if not anchored else
                                      f'{len(anchored)} from the anchors, the others on their '
                                      'lowest-numbered placed card (upright)'))

@@ -270,11 +270,13 @@ def run_survey_bench(quick: bool = False, seed: int = 1, floor_seeds: Optional[i
               f'processes, rendering included) | {1000.0 * r.detect_cpu_s / r.frames:.1f} | '
               f'{len(r.sightings) / max(r.frames, 1):.2f} |')
     print()
-    print('NEES of the rendered sightings (mean e^T Sigma^-1 e / 6 over (camera position, '
+    print('NEES of the rendered sightings (e^T Sigma^-1 e / 6 over (camera position, '
           'rotation) against the truth; rows: distance 0-3, 3-5, 5+ m; columns: view angle '
-          "0-30, 30-50, 50+ deg), used to draw the floor's sighting errors:")
-    for row in table:
-        print('  ' + '  '.join(f'{v:6.2f}' for v in row))
+          "0-30, 30-50, 50+ deg); from the median (used to draw the floor's sighting errors) "
+          'and the mean (gross errors included):')
+    for row, mean_row in zip(table, calibrate(rows, robust=False)):
+        print('  ' + '  '.join(f'{v:6.2f}' for v in row) + '    |  '
+              + '  '.join(f'{v:7.2f}' for v in mean_row))
     print(f'  ({len(rows)} rendered sightings; overall mean '
           f'{np.mean([r[2] for r in rows]):.2f})')
     return 0

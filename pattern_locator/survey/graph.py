@@ -621,18 +621,27 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
     keys = [(n, k) for n in sorted(active) for k in range(len(problem.frame_sightings[n]))]
     tangent = dict(zip(keys, tangent_covariances(
         [problem.frame_sightings[n][k] for n, k in keys])))
-    # A keyframe's own sightings are fixed; its later members' depend on the odometry.
-    own = {}
+    group = {key: problem.frame_sightings[key[0]][key[1]].group for key in keys}
+    # A keyframe's own sightings change only with their group's noise; its later
+    # members' also with the odometry.
+    own_Y = {}
     later = []
     for key in keys:
         n, k = key
         m = problem.sighting_member[n][k]
         Y = problem.members[n][m][1] @ problem.frame_sightings[n][k].T_camera_card
         if m == 0:
-            own[key] = _between(problem, key, Y, tangent[key], huber)
+            own_Y[key] = Y
         else:
             later.append((key, Y))
-    carried = _Carried(problem, later, tangent) if later else None
+    sighting_scale = np.ones(9)
+
+    def own_factors() -> Dict[Tuple[int, int], gtsam.BetweenFactorPose3]:
+        return {key: _between(problem, key, Y, tangent[key] * sighting_scale[group[key]],
+                              huber) for key, Y in own_Y.items()}
+
+    own = own_factors()
+    carried = _Carried(problem, later, tangent, group) if later else None
     fixed = gtsam.NonlinearFactorGraph()
     _add_gauge(fixed, gauge, seen_anchors, options)
     floors = _on_floor(problem, active) if options.level_floor else {}
@@ -652,6 +661,8 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
     factors: Dict[str, Optional[float]] = {}
     vce_rounds = 0
     vce_done = False
+    scaled_any = False
+    fractions: Dict[object, float] = {}
     fitted_bags: set = set()
     while True:
         rounds += 1
@@ -661,7 +672,8 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
         graph.push_back(fixed)
         sighting_factors = dict(own)
         if carried is not None:
-            sighting_factors.update(carried.factors(calibration, noise_scale, huber))
+            sighting_factors.update(carried.factors(calibration, noise_scale, huber,
+                                                    sighting_scale))
         for key, factor in sighting_factors.items():
             if key not in dropped:
                 graph.add(factor)
@@ -693,28 +705,35 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
                         default=0.0)
             calibration = fitted
             settled = moved <= 1.0
-        weigh = rounds == 1 or (settled and vce_rounds < 2 and not vce_done)
+        # The sightings' noise per bin is judged from the first round; the odometry's
+        # once its calibration has settled. Each is re-judged until it holds still.
+        weigh = not vce_done and (rounds == 1 or settled or vce_rounds == 0)
         final = settled and vce_done
         if weigh:
             marginals = _marginals(graph, values)
             factors = _variance_factors(problem, values, marginals, sighting_factors,
-                                        dropped, odometry)
-            dropped |= _outliers(problem, sighting_factors, values, dropped,
-                                 factors['sightings'] or 1.0)
-            # The odometry's noise is only judged once its calibration has settled.
-            if settled and options.rescale_noise and factors['odom_xy'] is not None:
+                                        dropped, odometry, group, fractions,
+                                        reuse=vce_rounds >= 2)
+            dropped |= _outliers(problem, sighting_factors, values, dropped, factors,
+                                 group)
+            steady = True
+            if options.rescale_noise:
                 vce_rounds += 1
-                lo, hi = options.odom_scale_bounds
-                scaled = tuple(
-                    min(max(old * math.sqrt(factors[name] / max(factors['sightings'], 1e-9)),
-                            lo), hi)
-                    for old, name in zip(noise_scale, ('odom_xy', 'odom_yaw')))
-                vce_done = max(abs(math.log(a / b)) for a, b in zip(scaled, noise_scale)) < 0.1
-                noise_scale = scaled
-            elif settled:
-                vce_done = True
-        elif settled:
-            vce_done = True
+                for g in range(9):
+                    f = factors.get(('sight', g))
+                    if f is not None:
+                        scaled_any = True
+                        steady = steady and abs(math.log(f)) < 0.2
+                        sighting_scale[g] = min(max(sighting_scale[g] * f, 1e-2), 1e3)
+                own = own_factors()
+                if settled and factors['odom_xy'] is not None:
+                    lo, hi = options.odom_scale_bounds
+                    scaled = tuple(min(max(old * math.sqrt(factors[name]), lo), hi)
+                                   for old, name in zip(noise_scale, ('odom_xy', 'odom_yaw')))
+                    steady = steady and max(abs(math.log(a / b)) for a, b in
+                                            zip(scaled, noise_scale)) < 0.1
+                    noise_scale = scaled
+            vce_done = settled and (steady or vce_rounds >= 4)
         t_weigh += time.perf_counter() - t0
         if final or last:
             break
@@ -728,7 +747,10 @@ def optimise(sightings: Sequence[Sighting], motions: Sequence[BagMotion],
     t0 = time.perf_counter()
     residuals = np.array([float(np.linalg.norm(sighting_factors[k].whitenedError(values)))
                           for k in sighting_factors if k not in dropped])
-    variance_factor = (factors.get('sightings') or 1.0) if options.rescale_noise else 1.0
+    # The bins' noise is already scaled; what is left is the sightings' overall factor.
+    variance_factor = 1.0
+    if options.rescale_noise and not scaled_any and factors.get('sightings') is not None:
+        variance_factor = factors['sightings']
     cards: List[MapCard] = []
     for j, ids in enumerate(problem.card_ids):
         if j not in init_cards:
@@ -779,8 +801,9 @@ class _Carried:
     """
 
     def __init__(self, problem: _Problem, later: List[Tuple[Tuple[int, int], Pose]],
-                 tangent: Dict[Tuple[int, int], np.ndarray]) -> None:
+                 tangent: Dict[Tuple[int, int], np.ndarray], group: Dict) -> None:
         self.problem = problem
+        self.group = np.array([group[key] for key, _ in later], dtype=int)
         self.keys = [key for key, _ in later]
         self.YR = np.array([Y.R for _, Y in later])
         self.Yt = np.array([Y.t for _, Y in later])
@@ -790,7 +813,8 @@ class _Carried:
                       for n, k in self.keys]
         self.members = [(n, problem.sighting_member[n][k]) for n, k in self.keys]
 
-    def factors(self, calibration, noise_scale, huber) -> Dict[Tuple[int, int], object]:
+    def factors(self, calibration, noise_scale, huber, sighting_scale
+                ) -> Dict[Tuple[int, int], object]:
         """Return the carried sightings' factors under a calibration and odometry noise."""
         pairs, R, t, lengths, bags = self.problem.member_step_arrays(calibration)
         index = {pair: i for i, pair in enumerate(pairs)}
@@ -800,7 +824,8 @@ class _Carried:
             mine = bags == bag
             sigmas[mine] = self.problem.odometry_sigmas(int(bag), lengths[mine], noise_scale)
         A = self.adjoint
-        cov = self.tangent + np.einsum('nij,nj,nkj->nik', A, sigmas[at] ** 2, A)
+        cov = self.tangent * sighting_scale[self.group][:, None, None] + np.einsum(
+            'nij,nj,nkj->nik', A, sigmas[at] ** 2, A)
         ZR = R[at] @ self.YR
         Zt = np.einsum('nij,nj->ni', R[at], self.Yt) + t[at]
         out = {}
@@ -964,8 +989,8 @@ def _made_vertical(T: Pose) -> Pose:
     return Pose(T.R @ rodrigues(np.array([angle, 0.0, 0.0])), T.t)
 
 
-def _outliers(problem: _Problem, sighting_factors, values, dropped, variance_factor: float
-              ) -> set:
+def _outliers(problem: _Problem, sighting_factors, values, dropped,
+              factors: Dict[object, Optional[float]], group: Dict) -> set:
     """Return the sightings far beyond the robust kernel (chi-square 6 dof, p < 1e-4)."""
     norms = {}
     for key, factor in sighting_factors.items():
@@ -974,9 +999,10 @@ def _outliers(problem: _Problem, sighting_factors, values, dropped, variance_fac
             norms[key] = float(w @ w)
     if not norms:
         return set()
-    # Against the sightings' own variance factor: their covariances may be pessimistic.
-    scale = max(variance_factor, 0.05)
-    out = {key for key, q in norms.items() if q / scale > OUTLIER_CHI2}
+    # Against each bin's own variance factor: the covariances may be pessimistic.
+    overall = factors.get('sightings') or 1.0
+    out = {key for key, q in norms.items()
+           if q / max(factors.get(('sight', group[key])) or overall, 0.05) > OUTLIER_CHI2}
     # Never drop a card's last sightings: its map pose would go with them.
     per_card: Dict[Tuple[int, int, int], int] = {}
     for key in norms:
@@ -992,12 +1018,15 @@ def _outliers(problem: _Problem, sighting_factors, values, dropped, variance_fac
     return out - keep
 
 
-# How many factors of each group to sample for their redundancy.
-REDUNDANCY_SAMPLES = 60
+# How many factors of a group to sample for its redundancy, and the fewest a group needs
+# for a variance factor of its own.
+REDUNDANCY_SAMPLES = {'sight': 12, 'odom': 30}
+MIN_GROUP = 20
 
 
 def _variance_factors(problem: _Problem, values, marginals, sighting_factors, dropped,
-                      odometry) -> Dict[str, Optional[float]]:
+                      odometry, group: Dict, fractions: Dict[object, float],
+                      reuse: bool) -> Dict[object, Optional[float]]:
     """
     Return the a-posteriori variance factors of the sightings and of the odometry.
 
@@ -1005,36 +1034,61 @@ def _variance_factors(problem: _Problem, values, marginals, sighting_factors, dr
     part of its dimensions not used up by the estimate: ``sum_i (d_i -
     tr(A_i Sigma_i A_i^T))`` with A_i a factor's whitened Jacobian and
     Sigma_i the joint marginal of its variables, estimated from a seeded
-    sample of the group's factors. The odometry gives two groups, its
-    translation (``odom_xy``) and its heading (``odom_yaw``); a base's z,
-    roll and pitch are a constraint and not counted.
+    sample of the group's factors (``fractions`` keeps each group's estimate;
+    with ``reuse`` a group already estimated is not sampled again: the
+    weights move little between the last rounds). Groups: the keyframes' own
+    sightings per bin of distance and view angle (``('sight', g)``; a later
+    member's sighting also carries odometry and is left out), the odometry's
+    translation (``odom_xy``) and heading (``odom_yaw``); a base's z, roll
+    and pitch are held by the floor, not counted. ``sightings``: all the
+    sightings' bins together.
     """
-    rng = np.random.default_rng(0)
-    out: Dict[str, Optional[float]] = {'sightings': None, 'odom_xy': None, 'odom_yaw': None}
+    rng = np.random.default_rng(rounds_seed(fractions))
     planar = [np.array([3, 4]), np.array([2])]
     full = [np.array([3, 4, 5]), np.array([0, 1, 2])]
-    # The sightings' group is the keyframes' own: a later member's sighting also
-    # carries odometry, whose noise is the odometry groups' business.
-    groups = [('sightings', [(f, np.arange(6)) for k, f in sighting_factors.items()
-                             if k not in dropped and problem.sighting_member[k[0]][k[1]] == 0])]
+    own = [k for k in sighting_factors if k not in dropped
+           and problem.sighting_member[k[0]][k[1]] == 0]
+    groups: List[Tuple[object, list]] = []
+    for g in range(9):
+        groups.append((('sight', g), [(sighting_factors[k], np.arange(6)) for k in own
+                                      if group[k] == g]))
     for name, which in (('odom_xy', 0), ('odom_yaw', 1)):
         groups.append((name, [(f, (full if problem.motions[bag].mount_source == 'camera'
                                    else planar)[which]) for bag, f in odometry]))
+    out: Dict[object, Optional[float]] = {'sightings': None}
+    total_chi2 = total_redundancy = 0.0
     for name, items in groups:
-        if len(items) < 10:
+        out[name] = None
+        if not items:
             continue
         chi2 = dims = 0.0
         for f, rows in items:
             w = np.asarray(f.whitenedError(values))[rows]
             chi2 += float(w @ w)
             dims += len(rows)
-        picks = rng.choice(len(items), min(REDUNDANCY_SAMPLES, len(items)), replace=False)
-        fraction = []
-        for i in picks:
-            f, rows = items[i]
-            A = f.linearize(values).jacobian()[0][rows]
-            sigma = marginals.jointMarginalCovariance(gtsam.KeyVector(list(f.keys()))
-                                                      ).fullMatrix()
-            fraction.append(1.0 - float(np.trace(A @ sigma @ A.T)) / len(rows))
-        out[name] = chi2 / (max(float(np.mean(fraction)), 0.02) * dims)
+        if len(items) >= MIN_GROUP and not (reuse and name in fractions):
+            samples = REDUNDANCY_SAMPLES['sight' if isinstance(name, tuple) else 'odom']
+            picks = rng.choice(len(items), min(samples, len(items)), replace=False)
+            used = []
+            for i in picks:
+                f, rows = items[i]
+                A = f.linearize(values).jacobian()[0][rows]
+                sigma = marginals.jointMarginalCovariance(gtsam.KeyVector(list(f.keys()))
+                                                          ).fullMatrix()
+                used.append(float(np.trace(A @ sigma @ A.T)) / len(rows))
+            fractions[name] = max(1.0 - float(np.mean(used)), 0.02)
+        if name in fractions:
+            redundancy = fractions[name] * dims
+            if len(items) >= MIN_GROUP:
+                out[name] = chi2 / redundancy
+            if isinstance(name, tuple):
+                total_chi2 += chi2
+                total_redundancy += redundancy
+    if total_redundancy > 0.0:
+        out['sightings'] = total_chi2 / total_redundancy
     return out
+
+
+def rounds_seed(fractions: Dict[object, float]) -> int:
+    """Return a seed that changes as groups get estimated (new picks each time)."""
+    return len(fractions)

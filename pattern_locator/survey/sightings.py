@@ -10,11 +10,18 @@ one into the other.
 """
 
 from dataclasses import dataclass
+import math
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..vision.geometry import Pose, skew
+
+# Bins of distance (m) and view angle (deg) whose sightings share a noise level: the
+# detector's covariance is pessimistic for near, frontal views and optimistic for far,
+# grazing ones, so the survey estimates a variance factor per bin.
+DISTANCE_EDGES = (0.0, 3.0, 5.0, np.inf)
+ANGLE_EDGES = (0.0, 30.0, 50.0, 90.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +51,19 @@ class Sighting:
     def distance_m(self) -> float:
         """Return the distance from the camera to the card's centre."""
         return float(np.linalg.norm(self.T_camera_card.t))
+
+    @property
+    def view_angle_deg(self) -> float:
+        """Return the angle between the card's normal and the line to the camera (phi)."""
+        c = self.T_camera_card.inverse().t
+        return math.degrees(math.acos(float(np.clip(c[2] / np.linalg.norm(c), -1.0, 1.0))))
+
+    @property
+    def group(self) -> int:
+        """Return the sighting's bin of distance and view angle (0..8; see GROUP_EDGES)."""
+        i = int(np.searchsorted(DISTANCE_EDGES, self.distance_m, side='right')) - 1
+        j = int(np.searchsorted(ANGLE_EDGES, self.view_angle_deg, side='right')) - 1
+        return 3 * min(max(i, 0), 2) + min(max(j, 0), 2)
 
 
 def tangent_covariance(T_camera_card: Pose, covariance: np.ndarray) -> np.ndarray:

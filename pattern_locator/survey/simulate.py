@@ -14,7 +14,8 @@ against rendered sightings (:func:`calibrate`):
 * the true error is drawn from that covariance times the ratio the
   rendered sightings showed between their actual squared errors and their
   reported covariances (per distance and view angle bin: the normalised
-  estimation error squared, NEES).
+  estimation error squared, NEES, from its median: the rendered sightings'
+  few gross errors are not simulated).
 """
 
 from dataclasses import dataclass
@@ -23,15 +24,12 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .sightings import Sighting
+from .sightings import ANGLE_EDGES, DISTANCE_EDGES, Sighting
 from ..card.pattern import PatternConfig
 from ..sim.walk import FloorPlan, Walk
 from ..vision.camera import CameraModel
 from ..vision.geometry import Pose, rodrigues
 from ..vision.pose_exact import pose_covariance
-
-DISTANCE_EDGES = (0.0, 3.0, 5.0, np.inf)
-ANGLE_EDGES = (0.0, 30.0, 50.0, 90.0)
 
 
 @dataclass(frozen=True)
@@ -112,24 +110,36 @@ def simulate_sightings(plan: FloorPlan, walk: Walk, camera: CameraModel,
     return out
 
 
-def calibrate(errors: Sequence[Tuple[float, float, float]], minimum: int = 8
-              ) -> Tuple[Tuple[float, ...], ...]:
+# The median of chi-square with 6 degrees of freedom: a robust NEES is median(6 NEES) / this.
+CHI2_6_MEDIAN = 5.348
+
+
+def calibrate(errors: Sequence[Tuple[float, float, float]], minimum: int = 8,
+              robust: bool = True) -> Tuple[Tuple[float, ...], ...]:
     """
     Return the NEES table from rendered sightings: (distance, view angle, NEES) each.
 
-    A bin with fewer than ``minimum`` sightings takes the mean of its
-    distance row (or of all sightings).
+    ``robust``: the bin's NEES from its median (a few gross errors, which the
+    survey's robust kernel and outlier test handle, do not set the noise of
+    all), else its mean. A bin with fewer than ``minimum`` sightings takes
+    its distance row's (or all sightings') value.
     """
     errors = np.asarray(errors, dtype=float).reshape(-1, 3)
-    overall = float(np.mean(errors[:, 2])) if len(errors) else 1.0
+
+    def level(values: np.ndarray) -> float:
+        if robust:
+            return float(np.median(6.0 * values)) / CHI2_6_MEDIAN
+        return float(np.mean(values))
+
+    overall = level(errors[:, 2]) if len(errors) else 1.0
     table = []
     for i in range(3):
         in_row = (errors[:, 0] >= DISTANCE_EDGES[i]) & (errors[:, 0] < DISTANCE_EDGES[i + 1])
-        row_mean = float(np.mean(errors[in_row, 2])) if in_row.sum() >= minimum else overall
+        row_mean = level(errors[in_row, 2]) if in_row.sum() >= minimum else overall
         row = []
         for j in range(3):
             cell = in_row & (errors[:, 1] >= ANGLE_EDGES[j]) & (errors[:, 1] < ANGLE_EDGES[j + 1])
-            row.append(float(np.mean(errors[cell, 2])) if cell.sum() >= minimum else row_mean)
+            row.append(level(errors[cell, 2]) if cell.sum() >= minimum else row_mean)
         table.append(tuple(row))
     return tuple(table)
 

@@ -127,6 +127,9 @@ def _parser() -> argparse.ArgumentParser:
     survey.add_argument('--no-odometry', action='store_true', help='ignore the odometry')
     survey.add_argument('--no-vertical-prior', action='store_true',
                         help='do not assume the cards hang vertical')
+    survey.add_argument('--refine-dots', action='store_true',
+                        help='end with a bundle adjustment on the dots of the sightings (slower; '
+                             'see bench --survey for what it gains)')
     survey.add_argument('--card-height', type=float, metavar='M',
                         help="the cards' nominal height above the floor (needs odometry)")
     survey.set_defaults(handler=_survey)
@@ -355,7 +358,7 @@ def _survey(args: argparse.Namespace) -> int:
         raise ConfigError('survey needs -o building.yaml (or --check MAP)')
     from .survey.run import survey_main
     return survey_main(args.bags, args.output, args.anchors, args.cards_json, args.report,
-                       topics, args.jobs, mount, options)
+                       topics, args.jobs, mount, options, refine_dots=args.refine_dots)
 
 
 def _bag_play(args: argparse.Namespace) -> int:

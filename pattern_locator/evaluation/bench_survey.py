@@ -109,12 +109,14 @@ def render_walk(plan: FloorPlan, walk: Walk, jobs: int) -> Rendered:
                     time.perf_counter() - start, jobs)
 
 
-def motion_of(walk: Walk, drift: OdometryDrift, seed: int) -> BagMotion:
+def motion_of(walk: Walk, drift: OdometryDrift, seed: int, camera=None) -> BagMotion:
     """Return the graph's view of a simulated walk: drifting odometry, fixed mount."""
     odometry = drift_odometry(walk, drift, seed=seed)
     stamps = np.array([round(float(t) * 1e9) for t in walk.times_s], dtype=np.int64)
-    return BagMotion('sim', 'tf_static', {f: walk.T_base_camera for f in range(len(walk.frames))},
-                     stamps, np.array([T.R for T in odometry]), np.array([T.t for T in odometry]))
+    frames = range(len(walk.frames))
+    return BagMotion('sim', 'tf_static', {f: walk.T_base_camera for f in frames},
+                     stamps, np.array([T.R for T in odometry]), np.array([T.t for T in odometry]),
+                     cameras={f: camera for f in frames} if camera is not None else {})
 
 
 @dataclass
@@ -204,8 +206,10 @@ def _rendered_section(name: str, plan: FloorPlan, walk: Walk, jobs: int, seed: i
     rendered = render_walk(plan, walk, jobs)
     anchor = min(c.ids.as_tuple() for c in plan.cards)
     anchors = {anchor: plan.card(anchor).T_true}
-    motion = motion_of(walk, OdometryDrift(), seed + 1)
+    motion = motion_of(walk, OdometryDrift(), seed + 1, default_survey_camera())
     for label, options in ((f'{name}, odometry', SurveyOptions()),
+                           (f'{name}, odometry, dots refined (bundle adjustment)',
+                            SurveyOptions(refine_dots=True)),
                            (f'{name}, no odometry', SurveyOptions(use_odometry=False))):
         result, cpu = _pinned_optimise(rendered.sightings, [motion], anchors, options)
         lines.append(_row(label, map_errors(result, plan, anchor, cpu), rendered.frames))

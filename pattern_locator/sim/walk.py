@@ -346,7 +346,8 @@ def make_walk(plan: FloorPlan, rate_hz: float = 10.0, speed_m_s: float = 0.35,
               odometry_per_frame: int = 2, mount: Optional[Pose] = None,
               hfov_deg: float = 90.0, max_yaw_rate: float = 0.8,
               look_range_m: Tuple[float, float] = (1.0, 6.0), max_view_deg: float = 65.0,
-              duration_s: Optional[float] = None, seed: int = 0) -> Walk:
+              duration_s: Optional[float] = None, floor_tilt_deg: float = 0.15,
+              floor_bump_m: float = 0.0015, seed: int = 0) -> Walk:
     """
     Walk the plan's route at ``speed_m_s``, the camera turned to frame as many cards as it can.
 
@@ -360,7 +361,9 @@ def make_walk(plan: FloorPlan, rate_hz: float = 10.0, speed_m_s: float = 0.35,
     at the middle of the chosen cards, turning at most ``max_yaw_rate``; with none in
     sight it faces along the route. A small seeded sway varies the views.
     Images are taken at ``rate_hz``, odometry samples ``odometry_per_frame``
-    times as often; ``duration_s`` stops the walk early.
+    times as often; ``duration_s`` stops the walk early. The floor is not
+    quite flat: the base rolls and pitches by ``floor_tilt_deg`` and rises by
+    ``floor_bump_m`` (standard deviations, varying over about a metre).
     """
     if not (rate_hz > 0 and speed_m_s > 0 and odometry_per_frame >= 1):
         raise ConfigError('walk: rate, speed and odometry_per_frame must be positive')
@@ -413,9 +416,27 @@ def make_walk(plan: FloorPlan, rate_hz: float = 10.0, speed_m_s: float = 0.35,
         step = float(_wrap(want - heading))
         heading += float(np.clip(step, -max_yaw_rate * dt, max_yaw_rate * dt))
         headings[k] = heading
-    poses = tuple(planar_pose(x, y, h, plan.floor_z) for (x, y), h in zip(xy, headings))
+    # A real floor is not flat: the base rocks and bumps a little, smoothly
+    # (over about a metre); its odometry does not see it.
+    bumps = _smooth(rng, n, speed_m_s * dt, (floor_tilt_deg, floor_tilt_deg, floor_bump_m))
+    poses = tuple(Pose(rodrigues(np.array([0.0, 0.0, h]))
+                       @ rodrigues(np.radians(np.array([b[0], b[1], 0.0]))),
+                       np.array([x, y, plan.floor_z + b[2]]))
+                  for (x, y), h, b in zip(xy, headings, bumps))
     frames = np.arange(0, n, odometry_per_frame)
     return Walk(np.arange(n) * dt, poses, mount, frames, targets)
+
+
+def _smooth(rng: np.random.Generator, n: int, step_m: float, sds: Sequence[float]
+            ) -> np.ndarray:
+    """Return (n, k) smooth random processes with standard deviations ``sds`` (1 m scale)."""
+    a = math.exp(-max(step_m, 1e-9) / 1.0)
+    out = np.zeros((n, len(sds)))
+    value = rng.normal(0.0, 1.0, len(sds))
+    for i in range(n):
+        value = a * value + math.sqrt(1.0 - a * a) * rng.normal(0.0, 1.0, len(sds))
+        out[i] = value
+    return out * np.asarray(sds, dtype=float)
 
 
 # Odometry ----------------------------------------------------------------------------

@@ -50,11 +50,12 @@ def motions_of(bags: Sequence[BagData], mounts: Sequence[Mount],
     for b, (bag, mount) in enumerate(zip(bags, mounts)):
         mount_of = {frame: camera_on_base(bag, mount, stamp)
                     for frame, stamp in frames.get(b, {}).items()}
-        kwargs = {}
+        kwargs = {'cameras': {frame: bag.camera_at(stamp)
+                              for frame, stamp in frames.get(b, {}).items()}}
         if bag.odom_stamps_ns is not None and len(bag.odom_stamps_ns) > 1:
-            kwargs = {'odom_stamps_ns': bag.odom_stamps_ns,
-                      'odom_R': np.array([T.R for T in bag.odom_poses]),
-                      'odom_p': np.array([T.t for T in bag.odom_poses])}
+            kwargs.update(odom_stamps_ns=bag.odom_stamps_ns,
+                          odom_R=np.array([T.R for T in bag.odom_poses]),
+                          odom_p=np.array([T.t for T in bag.odom_poses]))
         out.append(BagMotion(bag.path, mount.source, mount_of, **kwargs))
     return out
 
@@ -80,10 +81,9 @@ def run_survey(bag_paths: Sequence[str], topics: SurveyTopics = SurveyTopics(),
                           + (f' ({stats.bad_frames} frames unusable: {stats.first_problem})'
                              if stats.bad_frames else ''))
     start = time.process_time()
-    result = optimise(sightings, motions_of(bags, mounts, sightings), anchors, options)
     if refine_dots:
-        from .refine import refine_dots as refine
-        result = refine(result, sightings, bags, mounts, pattern, options)
+        options = replace(options, refine_dots=True)
+    result = optimise(sightings, motions_of(bags, mounts, sightings), anchors, options)
     return SurveyRun(bags, mounts, tuple(sightings), stats, result,
                      time.process_time() - start)
 

@@ -168,3 +168,29 @@ def test_a_similarity_is_recovered_and_a_moved_point_is_left_out():
     fit, inliers = robust_rigid(source, rigid, np.full(8, 0.01))
     assert list(np.flatnonzero(~inliers)) == [3]
     assert np.allclose(fit.R, T.R, atol=1e-9)
+
+
+def test_the_reprojection_factors_jacobians_match_finite_differences():
+    import gtsam
+    from pattern_locator.survey.refine import reprojection_factor
+    K = np.array([[640.0, 0.0, 640.0], [0.0, 640.0, 360.0], [0.0, 0.0, 1.0]])
+    base = gtsam.Pose3(gtsam.Rot3.Yaw(0.3), np.array([1.0, 2.0, 0.0]))
+    mount = Pose(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),
+                 np.array([0.1, 0.0, 1.2]))
+    camera = base.compose(to_gtsam(mount))
+    card = camera.compose(gtsam.Pose3(gtsam.Rot3.Ypr(0.1, 0.2, 3.0), np.array([0.2, -0.1, 3.0])))
+    factor = reprojection_factor(1, 2, mount, PATTERN.model_points(), np.zeros((17, 2)), K, 1.0)
+    values = gtsam.Values()
+    values.insert(1, base)
+    values.insert(2, card)
+    analytic = factor.linearize(values).jacobian()[0]
+    e0 = factor.unwhitenedError(values)
+    numeric = []
+    for key in (1, 2):
+        for d in range(6):
+            step = np.zeros(6)
+            step[d] = 1e-6
+            moved = gtsam.Values(values)
+            moved.update(key, values.atPose3(key).retract(step))
+            numeric.append((factor.unwhitenedError(moved) - e0) / 1e-6)
+    assert np.abs(analytic - np.array(numeric).T).max() < 1e-3 * np.abs(analytic).max()

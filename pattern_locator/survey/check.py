@@ -67,7 +67,8 @@ def check_map(map_path: str, bag_paths: Sequence[str], topics: SurveyTopics = Su
     # cards, not to the survey's own frame: project the frame's motions out, and fit
     # again with those tolerances until the cards held stay the same.
     for _ in range(4):
-        position_sd = _residual_sd(run.result, common, source, inliers, mapped)
+        position_sd = _residual_sd(run.result, common, source, inliers, mapped,
+                                   options.card_floor_sd_m)
         tolerance = np.maximum(K_SIGMA * np.array([position_sd[i] for i in common]),
                                MIN_POSITION_M)
         T, held = robust_rigid(source, target, tolerance)
@@ -97,14 +98,16 @@ def check_map(map_path: str, bag_paths: Sequence[str], topics: SurveyTopics = Su
     return out
 
 
-def _residual_sd(result, common, source: np.ndarray, inliers: np.ndarray, mapped) -> dict:
+def _residual_sd(result, common, source: np.ndarray, inliers: np.ndarray, mapped,
+                 floor_sd_m: float) -> dict:
     """
     Return each card's position sd after a rigid fit on the inliers.
 
     With x the cards' positions (joint covariance S) and G the rigid motions
     (``dx_j = t + w x p_j``), the fit's residual is ``(I - P) x`` with P the
     least-squares projection onto G over the inliers: its covariance is
-    ``(I - P) S (I - P)^T``. The map's own ``std_dev`` adds to it.
+    ``(I - P) S (I - P)^T``. The map's own ``std_dev`` and the survey's floor
+    for what a card's sightings share add to it.
     """
     n = len(common)
     S = result.card_position_covariance(common)
@@ -121,6 +124,7 @@ def _residual_sd(result, common, source: np.ndarray, inliers: np.ndarray, mapped
     out = {}
     for k, ids in enumerate(common):
         var = float(np.max(np.linalg.eigvalsh(C[3 * k:3 * k + 3, 3 * k:3 * k + 3])))
+        var += floor_sd_m ** 2
         if mapped[ids].position_sd_m is not None:
             var += max(mapped[ids].position_sd_m) ** 2
         out[ids] = math.sqrt(max(var, 0.0))

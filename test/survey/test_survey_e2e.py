@@ -27,7 +27,8 @@ def surveyed(room_bag, tmp_path_factory):
     truth = load_building(room_bag / 'truth.yaml', PATTERN)
     # The anchor: the card the walk's camera aimed at most in the recorded frames.
     plan = room_corridor_plan(BAG_SEED, PATTERN)
-    walk = make_walk(plan, rate_hz=BAG_RATE_HZ, seed=BAG_SEED)
+    walk = make_walk(plan, rate_hz=BAG_RATE_HZ, seed=BAG_SEED,
+                     duration_s=BAG_FRAMES / BAG_RATE_HZ + 1.0)
     aimed = walk.targets[walk.frames[:BAG_FRAMES]]
     first = truth.card(plan.cards[int(np.bincount(aimed[aimed >= 0]).argmax())].ids)
     anchors = yaml.safe_load((room_bag / 'truth.yaml').read_text())
@@ -38,7 +39,7 @@ def surveyed(room_bag, tmp_path_factory):
     (out / 'anchors.yaml').write_text(yaml.safe_dump(anchors))
     status = main(['survey', str(room_bag), '-o', str(out / 'map.yaml'), '--anchors',
                    str(out / 'anchors.yaml'), '--cards-json', str(out / 'cards.json'),
-                   '--report', str(out / 'report'), '--jobs', '2'])
+                   '--report', str(out / 'report'), '--jobs', '2'])  # the pool's path
     return status, out, truth, first
 
 

@@ -26,7 +26,7 @@ from rosbags.typesys import get_typestore, Stores
 from ..errors import ConfigError, PatternLocatorError
 from ..localization.head import angles_from_joint_state, HeadGeometry
 from ..vision.camera import CameraModel
-from ..vision.geometry import Pose, rotation_from_quaternion
+from ..vision.geometry import Pose, rodrigues, rotation_from_quaternion
 
 IMAGE_TOPIC = '/camera/image_raw'
 INFO_TOPIC = '/camera/camera_info'
@@ -152,7 +152,6 @@ def _interpolate(stamps: np.ndarray, poses: Sequence[Pose], stamp_ns: int, max_g
     w = (stamp_ns - stamps[i - 1]) / (stamps[i] - stamps[i - 1])
     a, b = poses[i - 1], poses[i]
     step = a.inverse() @ b
-    from ..vision.geometry import rodrigues
     return a @ Pose(rodrigues(w * step.rvec()), w * step.t)
 
 

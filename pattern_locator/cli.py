@@ -137,7 +137,46 @@ def _parser() -> argparse.ArgumentParser:
                        help='the ROS-free cores of issue 12 on the simulated floor (covariance '
                             'coverage, odometry bridge, gaze); the options after it are its '
                             'own (--drive-core --help)')
+    bench.add_argument('--survey', action='store_true',
+                       help='the survey: map accuracy, ellipses and timings on rendered and '
+                            'simulated walks, with and without odometry')
     bench.set_defaults(handler=_bench)
+
+    survey = sub.add_parser(
+        'survey', help="map a building's cards from walks recorded in bags",
+        description='Detect the cards in every frame of rosbag2 bags (MCAP or sqlite3) and '
+                    'optimise card and camera poses (GTSAM) into a building map the locator '
+                    'loads. With --check MAP: how well an existing map agrees with a walk.')
+    survey.add_argument('bags', nargs='+', metavar='BAG', help='rosbag2 bag directories')
+    survey.add_argument('-o', '--output', help='the building map to write (YAML)')
+    survey.add_argument('--check', metavar='MAP',
+                        help='compare this building map with the walk instead, card by card '
+                             '(exit 1 when a card moved)')
+    survey.add_argument('--anchors', help='a building map of the cards whose poses are known')
+    survey.add_argument('--cards-json', help='also write every card as JSON here')
+    survey.add_argument('--report', metavar='DIR', help='write plots and notes into DIR')
+    survey.add_argument('--image-topic', help='default: /camera/image_raw, or the only image '
+                                              'topic')
+    survey.add_argument('--camera-info-topic', help='default: /camera/camera_info, or the '
+                                                    'only one')
+    survey.add_argument('--odom-topic', help='default: /odom, or the only Odometry topic')
+    survey.add_argument('--joint-states-topic', help="the pan/tilt head's joint states "
+                                                     '(default: /camera/joint_states)')
+    survey.add_argument('--jobs', type=int, help='detection processes (default: all cores)')
+    survey.add_argument('--camera-mount', type=float, nargs=6,
+                        metavar=('X', 'Y', 'Z', 'ROLL', 'PITCH', 'YAW'),
+                        help="the camera optical frame on the odometry's base: metres and "
+                             'degrees (R = Rz(yaw) Ry(pitch) Rx(roll)); used when the bag has '
+                             'no /tf_static chain')
+    survey.add_argument('--no-odometry', action='store_true', help='ignore the odometry')
+    survey.add_argument('--no-vertical-prior', action='store_true',
+                        help='do not assume the cards hang vertical')
+    survey.add_argument('--refine-dots', action='store_true',
+                        help='end with a bundle adjustment on the dots of the sightings (slower; '
+                             'see bench --survey for what it gains)')
+    survey.add_argument('--card-height', type=float, metavar='M',
+                        help="the cards' nominal height above the floor (needs odometry)")
+    survey.set_defaults(handler=_survey)
 
     bag = sub.add_parser('bag', help='record a simulated route, or play a bag into ROS',
                          description='rosbag2 bags (MCAP) without ros2cli.')
@@ -145,8 +184,13 @@ def _parser() -> argparse.ArgumentParser:
     record = bag_sub.add_parser('record-sim', help="render the paper's route into a bag")
     record.add_argument('out', help='bag directory to create')
     record.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
-    record.add_argument('--rate', type=float, default=2.0, help='images per second')
+    record.add_argument('--rate', type=float, help='images per second (default 2; 10 with '
+                                                   '--survey)')
     record.add_argument('--seed', type=int, default=7, help='seed of the noise (default 7)')
+    record.add_argument('--survey', action='store_true',
+                        help='a survey walk through a room and a corridor instead: cards as '
+                             'hung, odometry with drift, truth.yaml beside the bag')
+    record.add_argument('--frames', type=int, help='with --survey: stop after this many images')
     record.set_defaults(handler=_bag_record)
     play = bag_sub.add_parser('play', help='publish a bag with its recorded timing')
     play.add_argument('bag', help='bag directory (or .mcap / .db3 file)')
@@ -355,13 +399,40 @@ def _bench(args: argparse.Namespace) -> int:
     if args.node:
         from .evaluation.bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
+    if args.survey:
+        from .evaluation.bench_survey import run_survey_bench
+        return run_survey_bench(quick=args.quick, seed=args.seed)
     from .evaluation.bench import run_bench
     return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
 
 
 def _bag_record(args: argparse.Namespace) -> int:
+    if args.survey:
+        from .survey.record import record_survey_main
+        return record_survey_main(args.out, frames=args.frames,
+                                  rate_hz=10.0 if args.rate is None else args.rate,
+                                  seed=args.seed)
     from .nodes.bags import record_sim_main
-    return record_sim_main(args.out, n_stops=args.stops, rate_hz=args.rate, seed=args.seed)
+    return record_sim_main(args.out, n_stops=args.stops,
+                           rate_hz=2.0 if args.rate is None else args.rate, seed=args.seed)
+
+
+def _survey(args: argparse.Namespace) -> int:
+    from .survey.bagio import SurveyTopics
+    from .survey.run import options_from, parse_mount
+    topics = SurveyTopics(args.image_topic, args.camera_info_topic, args.odom_topic,
+                          args.joint_states_topic)
+    options = options_from(args.no_odometry, args.no_vertical_prior, args.card_height)
+    mount = parse_mount(args.camera_mount)
+    if args.check:
+        from .survey.check import check_main
+        return check_main(args.check, args.bags, topics=topics, jobs=args.jobs,
+                          camera_mount=mount, options=options)
+    if not args.output:
+        raise ConfigError('survey needs -o building.yaml (or --check MAP)')
+    from .survey.run import survey_main
+    return survey_main(args.bags, args.output, args.anchors, args.cards_json, args.report,
+                       topics, args.jobs, mount, options, refine_dots=args.refine_dots)
 
 
 def _bag_play(args: argparse.Namespace) -> int:

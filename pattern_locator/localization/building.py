@@ -8,7 +8,10 @@ T_room_card``. A card's frame is the pattern frame: origin at the centre dot,
 x right, y up (towards point 1), z out of the wall into the room.
 
 The file format is documented at the top of the shipped
-``config/building.yaml``. Loading checks everything a typo could break and
+``config/building.yaml``. A card may also carry its standard deviations, as
+a surveyed map (``pattern-locator survey``) writes them: ``std_dev:
+{position_m: [x, y, z], rotation_deg: [x, y, z]}`` about the room frame's
+axes (either part optional). Loading checks everything a typo could break and
 raises :class:`~.errors.ConfigError` with one line naming the file and the
 exact place (``floor 1 room 3 card 2: ...``).
 """
@@ -309,7 +312,7 @@ def _card(source: str, floor: int, room: int, index: int, data: Any, pattern: Pa
     number = _number_key(f'{source}: floor {floor} room {room} cards[{index}]', data,
                          _CARD_KEYS, 'pattern')
     where = f'{source}: {_card_label(floor, room, number)}'
-    _check_keys(where, data, _CARD_KEYS, required=('pose',))
+    _check_keys(where, data, _CARD_KEYS + ('std_dev',), required=('pose',))
     _check_range(where, ranges, 'pattern', number)
     expected = pattern.encode(floor, room, number)
     if data.get('code') is not None:

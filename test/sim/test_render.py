@@ -12,7 +12,9 @@ from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.geometry import Pose
 import pytest
 
-CFG = PatternConfig()
+# The paper's card (no handedness marks); the marks have their own tests.
+CFG = PatternConfig(handedness_mark=None)
+MARKED = PatternConfig()
 CODE = Code.parse('R-KRGBBGRG')
 CAMERA = CameraModel.from_focal(320, 240, 300.0)
 # Frontal and upright: card x = camera x, card y = camera -y.

@@ -1,0 +1,494 @@
+"""
+Sub-pixel centres: each dot measured where the homography puts it.
+
+Every dot (and every mark) gets a window round its predicted position: its
+image ellipse, grown for blur, ending at the card's edge, and shared with
+its neighbours by distance (a pixel counts for the nearest spot only). The
+centre is the darkness-weighted centroid of the window (darkness below the
+local white, less a floor that keeps paper noise out), recomputed with the
+window and the sharing re-centred on the latest estimates. Once the blur is
+known (from the spread of all the dots), a last centroid is taken in a
+window just big enough for the dot and its blur, with any dark region not
+connected to the dot left out: the centre of the dot's image ellipse, which
+the exact estimator corrects to the projected circle centre. Big dots are
+measured on the image decimated by two (area averaging keeps centroids);
+the measurement does not depend on segmentation, so faint dots and dots
+merged with a neighbour (a far, tilted card) are measured like the others.
+
+A window is a dot when it is dark enough against the paper and its noise,
+its darkness stays inside it (paper round the dot, not an object over it),
+it is not much bigger than a dot, its centre stays near the prediction and
+its darkness is point-symmetric (a dot's image is, blurred or not; a dot
+partly hidden, or touched by an object, is not).
+
+Colour: a cheap lens or composite video shifts the colour channels by a
+pixel or two, so each channel is measured where its own image of the dot
+is. The shift is the same for every dot of a card: the median, over the
+dots dark in a channel, of that channel's centroid minus the dot's. Each
+channel's darkness (linear light, against the card's white) is the mean
+over the inner part of the dot at that shift, well clear of any neighbour.
+"""
+
+from dataclasses import dataclass
+from typing import List, Optional
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel
+from .cards import apply_h, h_jacobian
+from .detector_params import DetectorParams
+from .dots import DotImage
+
+# Spots at least this big (semi-minor axis, image pixels) are measured on the
+# decimated image.
+_DECIMATED_FROM = 6.0
+
+
+@dataclass(frozen=True)
+class SpotMeasures:
+    """Measurements of dots (or marks) at plane points, one row per point."""
+
+    points: np.ndarray      # (P, 2) measured centres, image pixels
+    predicted: np.ndarray   # (P, 2) where the homography put them
+    valid: np.ndarray       # (P,) measured and dot-like
+    peak: np.ndarray        # (P,) darkest-channel peak darkness / local white (0..1)
+    colour: np.ndarray      # (P, 3) per-channel darkness, linear, BGR (NaN if grey)
+    area: np.ndarray        # (P,) equivalent area of the dot, pixels
+    inside: np.ndarray      # (P,) window fully inside the image
+
+
+def card_white(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
+               paper_xy: np.ndarray) -> Optional[np.ndarray]:
+    """Median colour (BGR, or grey) of the card's paper at plane points between the dots."""
+    pts = apply_h(H, paper_xy)
+    if camera is not None and camera.has_distortion:
+        pts = camera.distort_pixels(pts)
+    h, w = dot_image.image.shape[:2]
+    inside = (pts[:, 0] >= 1) & (pts[:, 0] < w - 1) & (pts[:, 1] >= 1) & (pts[:, 1] < h - 1)
+    pts = pts[inside]
+    if len(pts) < 4:
+        return None
+    xs = np.round(pts[:, 0]).astype(int)
+    ys = np.round(pts[:, 1]).astype(int)
+    samples = dot_image.image[ys, xs].astype(np.float32)
+    white = np.median(samples, axis=0)
+    if np.max(white) < dot_image.params.min_white:
+        return None
+    return np.maximum(np.atleast_1d(white), 1.0)
+
+
+@dataclass(frozen=True)
+class PlaneLayout:
+    """
+    Spots on the card and how its plane is shared between them.
+
+    ``owner`` is a raster over the card (``resolution`` metres a cell, from
+    ``-half`` to ``+half``) holding, for every place, the spot whose edge is
+    nearest (a power diagram), or -1 off the card. Windows are shared by it,
+    so that a steep view, whose dots are long thin ellipses side by side,
+    splits them as the card's own plane does.
+    """
+
+    points: np.ndarray          # (P, 2) metres
+    radii: np.ndarray           # (P,) metres
+    owner: np.ndarray           # (R, R) int16
+    resolution: float
+    half: float
+
+
+def plane_layout(points: np.ndarray, radii: np.ndarray, card_half: float,
+                 resolution: float = 0.001) -> PlaneLayout:
+    """Build the :class:`PlaneLayout` of spots on a card of half-size ``card_half``."""
+    n = int(np.ceil(2 * card_half / resolution))
+    axis = -card_half + resolution * (np.arange(n) + 0.5)
+    x, y = np.meshgrid(axis, -axis)              # row 0 is the card's top (+y)
+    best = np.full(x.shape, np.inf)
+    owner = np.full(x.shape, -1, dtype=np.int16)
+    for k, ((px, py), r) in enumerate(zip(points, radii)):
+        d = np.hypot(x - px, y - py) - r
+        nearer = d < best
+        best[nearer] = d[nearer]
+        owner[nearer] = k
+    return PlaneLayout(np.asarray(points, float), np.asarray(radii, float), owner,
+                       float(resolution), float(card_half))
+
+
+class _Windows:
+    """
+    The windows of a group of spots, gathered at once from one image.
+
+    Coordinates are the source image's pixels relative to each window's
+    integer origin (``base``); the source is the image (scale 1) or the
+    image decimated by ``scale``, whose pixel (x, y) covers image pixels
+    ``scale * x .. scale * x + scale - 1``.
+    """
+
+    def __init__(self, dot_image: DotImage, index: np.ndarray, scale: int,
+                 pred: np.ndarray, axes: np.ndarray, semi: np.ndarray,
+                 to_plane: np.ndarray) -> None:
+        source = dot_image.image if scale == 1 else dot_image.small
+        h, w = source.shape[:2]
+        self.index, self.scale = index, scale
+        self.off = (scale - 1) / 2.0
+        centre = (pred[index] - self.off) / scale
+        self.semi = semi[index] / scale
+        half = int(np.ceil(self.semi[:, 0].max())) + 2
+        size = 2 * half + 1
+        self.base = np.round(centre).astype(np.intp) - half              # window origin
+        j = np.arange(size)
+        xs = self.base[:, 0, None, None] + j[None, None, :]
+        ys = self.base[:, 1, None, None] + j[None, :, None]
+        self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+        self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
+        self.X = j.astype(np.float32)[None, None, :]
+        self.Y = j.astype(np.float32)[None, :, None]
+        self.axes = axes[index].astype(np.float32)
+        ax = self.axes
+        # Each pixel's coordinates along the spot's ellipse axes.
+        self.A0 = ax[:, 0, 0, None, None] * self.X + ax[:, 1, 0, None, None] * self.Y
+        self.B0 = ax[:, 0, 1, None, None] * self.X + ax[:, 1, 1, None, None] * self.Y
+        self.pred = centre - self.base
+        self.c = self.pred.copy()
+        self.to_plane = (to_plane[index] * scale).astype(np.float32)     # metres per pixel
+
+    def to_image(self, c: np.ndarray) -> np.ndarray:
+        """Window coordinates (K, 2) -> image pixels."""
+        return (c + self.base) * self.scale + self.off
+
+    def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
+        """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
+        ax = self.axes
+        ca = (ax[:, 0, 0] * c[:, 0] + ax[:, 1, 0] * c[:, 1]).astype(np.float32)
+        cb = (ax[:, 0, 1] * c[:, 0] + ax[:, 1, 1] * c[:, 1]).astype(np.float32)
+        sa = (1.0 / semi[:, 0] ** 2).astype(np.float32)[:, None, None]
+        sb = (1.0 / semi[:, 1] ** 2).astype(np.float32)[:, None, None]
+        a = self.A0 - ca[:, None, None]
+        b = self.B0 - cb[:, None, None]
+        return a * a * sa + b * b * sb
+
+    def plane(self, anchor: np.ndarray, anchor_xy: np.ndarray):
+        """Return each pixel's card-plane position; the spot at ``anchor`` is at ``anchor_xy``."""
+        m = self.to_plane
+        dx = self.X - anchor[:, 0, None, None].astype(np.float32)
+        dy = self.Y - anchor[:, 1, None, None].astype(np.float32)
+        qx = anchor_xy[:, 0, None, None].astype(np.float32) + m[:, 0, 0, None, None] * dx \
+            + m[:, 0, 1, None, None] * dy
+        qy = anchor_xy[:, 1, None, None].astype(np.float32) + m[:, 1, 0, None, None] * dx \
+            + m[:, 1, 1, None, None] * dy
+        return qx, qy
+
+    def cells(self, layout: PlaneLayout, spot: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+        """Pixels whose place on the card belongs to each window's spot (a layout index)."""
+        qx, qy = self.plane(anchor, layout.points[spot])
+        n = layout.owner.shape[0]
+        col = ((qx + layout.half) / layout.resolution).astype(np.intp)
+        row = ((layout.half - qy) / layout.resolution).astype(np.intp)
+        inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
+        owner = layout.owner[np.clip(row, 0, n - 1), np.clip(col, 0, n - 1)]
+        return inside & (owner == spot[:, None, None]), qx, qy
+
+    def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:
+        total = weight.sum(axis=(1, 2))
+        good = total > 0
+        safe = np.where(good, total, 1.0)
+        cx = (weight * self.X).sum(axis=(1, 2)) / safe
+        cy = (weight * self.Y).sum(axis=(1, 2)) / safe
+        return np.where(good[:, None], np.column_stack([cx, cy]), c)
+
+
+def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
+                  layout: PlaneLayout, spots: np.ndarray, white: Optional[np.ndarray],
+                  core_margin: Optional[float] = None) -> SpotMeasures:
+    """
+    Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
+
+    ``H`` maps the plane (metres) to undistorted pixels. ``white`` is the
+    card's paper colour (:func:`card_white`), for the colours; None for grey
+    images or when no colour is wanted. The peak darkness is measured within
+    the spot's image ellipse grown by ``core_margin`` pixels round where it
+    should be (default: the largest channel shift, plus one).
+    """
+    params = dot_image.params
+    if core_margin is None:
+        core_margin = params.max_channel_shift_px + 1.0
+    spots = np.asarray(spots)
+    plane_xy, radii = layout.points[spots], layout.radii[spots]
+    n = len(spots)
+    und = apply_h(H, plane_xy)
+    L = h_jacobian(H, plane_xy)                                # (n, 2, 2) px per metre
+    if camera is not None and camera.has_distortion:
+        pred = camera.distort_pixels(und)
+        # The lens's local linear map, by differences of one pixel.
+        dx = camera.distort_pixels(und + [1.0, 0.0]) - pred
+        dy = camera.distort_pixels(und + [0.0, 1.0]) - pred
+        L = np.stack([dx, dy], axis=2) @ L
+    else:
+        pred = und
+    out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool), np.zeros(n),
+                       np.full((n, 3), np.nan), np.zeros(n), np.zeros(n, dtype=bool))
+    U, sv, _ = np.linalg.svd(L)                                # axes of each spot's ellipse
+    major = sv[:, 0] * radii
+    minor = sv[:, 1] * radii
+    # Window: the spot's ellipse, 1.25 times as big plus a margin for blur
+    # and channel shift, along its own axes.
+    margin = 2.0 + params.max_channel_shift_px
+    semi = np.column_stack([1.25 * major + margin, 1.25 * minor + margin])
+    h, w = dot_image.image.shape[:2]
+    # A degenerate homography would ask for windows bigger than the image:
+    # memory stays bounded by the image, nothing is measured.
+    if not (np.all(np.isfinite(semi)) and np.all(np.isfinite(pred))
+            and semi.max() <= 0.25 * max(h, w) and np.all(sv[:, 1] > 0)):
+        return out
+    Linv = np.linalg.inv(L)
+    big = minor >= _DECIMATED_FROM if dot_image.scale > 1 else np.zeros(n, dtype=bool)
+    groups = [_Windows(dot_image, index, scale, pred, U, semi, Linv)
+              for index, scale in ((np.flatnonzero(~big), 1),
+                                   (np.flatnonzero(big), dot_image.scale)) if len(index)]
+    for g in groups:
+        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, params,
+                    core_margin, out)
+    blur = _blur(groups, U, major, minor, out.valid)
+    for g in groups:
+        _last_pass(g, layout, spots, blur, major, minor, pred, out)
+    if white is not None and dot_image.image.ndim == 3:
+        _colours(groups, white, params, major, minor, out)
+    return out
+
+
+def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
+                pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
+                params: DetectorParams, core_margin: float, out: SpotMeasures) -> None:
+    """Centroid in a generous window, and the tests of a dot, written into ``out``."""
+    idx, s = g.index, g.scale
+    pixels = g.pixels
+    dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
+    level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
+    # Noise of the source image: decimation averages s * s pixels.
+    sigma = (dot_image.noise_at(pred[idx, 0], pred[idx, 1]) / s).astype(np.float32)
+    floor = np.maximum(0.04 * level, 2.0 * sigma)
+    weight = np.maximum((level - floor)[:, None, None] - dark, 0.0)
+    mine, qx, qy = g.cells(layout, spots[idx], g.pred)
+    # On the card, inside its edge by two image pixels (blur carries what is
+    # beyond onto it)...
+    room_x = (layout.half - 2.0 * np.hypot(Linv[idx, 0, 0], Linv[idx, 0, 1])).astype(np.float32)
+    room_y = (layout.half - 2.0 * np.hypot(Linv[idx, 1, 0], Linv[idx, 1, 1])).astype(np.float32)
+    on_card = (np.abs(qx) < room_x[:, None, None]) & (np.abs(qy) < room_y[:, None, None])
+    # ...but never closer than a pixel and a half round the spot itself: a
+    # steep view brings the edge that close, and cutting the spot's own blur
+    # would pull its centre.
+    own = g.ellipse(g.pred, np.column_stack([major[idx], minor[idx]]) / s + 1.5) <= 1.0
+    cell = g.in_image & mine & (on_card | own)
+    weight = weight * cell
+    semi = g.semi
+    c = g.c
+    for _ in range(2):
+        c = g.centroid(weight * (g.ellipse(c, semi) <= 1.0), c)
+    e = g.ellipse(c, semi)
+    window = e <= 1.0
+    # Peak darkness (3x3 mean) where the spot should be: a spot that is not
+    # there drifts off towards whatever is dark nearby.
+    core = np.minimum((major[idx] / s + core_margin / s) ** 2 / semi[:, 0] ** 2, 1.0)
+    top = (_box3(weight) * (g.ellipse(g.pred, semi) <= core[:, None, None])).max(axis=(1, 2))
+    rim = window & (e > 0.6) & cell
+    rim_mean = (weight * rim).sum(axis=(1, 2)) / np.maximum(rim.sum(axis=(1, 2)), 1)
+    wd = weight * window
+    mass = wd.sum(axis=(1, 2))
+    equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
+    expected = np.pi * major[idx] * minor[idx]
+    relative = top / np.maximum(level, 1.0)
+    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * sigma)
+    isolated = rim_mean <= 0.3 * top
+    sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
+    # A window beyond the border: a spot cut by it has a false centre.
+    whole = (g.in_image | ~window).all(axis=(1, 2))
+    out.inside[idx] = whole
+    out.points[idx] = g.to_image(c)
+    out.valid[idx] = whole & dark_enough & isolated & sized
+    out.peak[idx] = relative
+    out.area[idx] = equivalent
+    # Spread of each spot's darkness (image pixels^2), for the blur.
+    total = np.maximum(mass, 1e-6)
+    dx = g.X - c[:, 0, None, None].astype(np.float32)
+    dy = g.Y - c[:, 1, None, None].astype(np.float32)
+    g.spread = np.stack([(wd * dx * dx).sum(axis=(1, 2)), (wd * dx * dy).sum(axis=(1, 2)),
+                         (wd * dy * dy).sum(axis=(1, 2))], axis=1) / total[:, None] * (s * s)
+    g.raw = np.maximum((level - floor)[:, None, None] - dark, 0.0) * g.in_image
+    g.c, g.cell, g.window = c, cell, window
+    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+
+
+def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
+          valid: np.ndarray) -> np.ndarray:
+    """
+    Estimate the image's blur as a covariance (2x2, image pixels^2) from the dots' spread.
+
+    A sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along
+    its axes; blur adds its own covariance to every dot alike (defocus in
+    all directions, motion along one). The median over the dots resists a
+    few spoilt by neighbours or objects.
+    """
+    spread = np.full((len(valid), 3), np.nan)
+    for g in groups:
+        spread[g.index] = g.spread
+    c, s = U[:, 0, 0], U[:, 1, 0]                       # major axis direction
+    a2, b2 = major ** 2 / 4, minor ** 2 / 4
+    sharp = np.column_stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c])
+    if np.count_nonzero(valid) < 3:
+        return 0.25 * np.eye(2)
+    xx, xy, yy = np.median(spread[valid] - sharp[valid], axis=0)
+    evals, evecs = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
+    return evecs @ np.diag(np.clip(evals, 0.1, None)) @ evecs.T
+
+
+def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.ndarray,
+               major: np.ndarray, minor: np.ndarray, pred: np.ndarray,
+               out: SpotMeasures) -> None:
+    """
+    Centroid again in a window just big enough for the dot and the blur.
+
+    The first windows were generous (the blur was unknown) and shared as the
+    prediction put the spots; now they are shared about the measured centre.
+    An object next to a dot, or the card's edge, would pull a centroid taken
+    in a generous window.
+    """
+    idx, s = g.index, g.scale
+    axes = g.axes.astype(np.float64)
+    # The blur's extent (2.5 sigma) along each dot's axes, plus a pixel.
+    ext = np.column_stack([np.sqrt(np.einsum('ki,ij,kj->k', axes[:, :, a], blur, axes[:, :, a]))
+                           for a in (0, 1)])
+    tight = (np.column_stack([major[idx], minor[idx]]) + 2.5 * ext + 1.0) / s
+    c = g.c
+    mine = g.cells(layout, spots[idx], c)[0]
+    weight = g.raw * mine * g.on_card
+    # Dark things in the window apart from the dot (an object a pixel or
+    # two away, a neighbour's blur) are not the dot's: its own dark region is
+    # the connected one at its centre.
+    connected = _own_region(weight, g.top, c)
+    weight = weight * connected
+    for _ in range(2):
+        c = g.centroid(weight * (g.ellipse(c, tight) <= 1.0), c)
+    region = g.ellipse(c, tight) <= 1.0
+    out.points[idx] = g.to_image(c)
+    steady = np.hypot(*(out.points[idx] - pred[idx]).T) <= np.maximum(1.5, 0.3 * major[idx] + 1.0)
+    # Reflecting a dot a pixel or two thick by interpolation blurs it: more
+    # room for thin dots.
+    grid = 0.15 / np.maximum(minor[idx] / s, 0.5)
+    g.asymmetry = _asymmetry(g, weight, region & mine, c, g.sigma)
+    # An object touching the dot joins its dark region beyond the dot and
+    # its blur.
+    beyond = g.window & mine & (g.ellipse(c, tight + 1.0) > 1.0)
+    stained = np.count_nonzero(beyond & (weight > 0.25 * g.top[:, None, None]), axis=(1, 2))
+    touched = stained > 0.1 * np.count_nonzero(beyond, axis=(1, 2)) + 1
+    out.valid[idx] &= steady & (g.asymmetry <= 0.08 + grid) & ~touched
+    g.c = c
+
+
+def _asymmetry(g: _Windows, weight: np.ndarray, region: np.ndarray, c: np.ndarray,
+               sigma: np.ndarray) -> np.ndarray:
+    """
+    How far each spot's darkness is from point-symmetric about its centre, less the noise.
+
+    A dot's image is point-symmetric, blurred or not (and so is the union of
+    its colour channels shifted opposite ways); a dot partly hidden, or
+    touched by an object, is not. Compared where both a pixel and its
+    reflection belong to the spot, so that sharing pixels with a close
+    neighbour cuts both sides alike. Returns |w - reflected w| / (w +
+    reflected w) summed, less what the pixel noise alone gives (|difference
+    of two noisy pixels| is 1.13 sigma on average).
+    """
+    region = region.astype(np.float32)
+    both = region * (_point_reflection(region, c) > 0.99)
+    own = weight * both
+    mirror = _point_reflection(weight, c) * both
+    total = np.maximum((own + mirror).sum(axis=(1, 2)), 1e-6)
+    noise = 1.13 * sigma * np.count_nonzero(own > 0, axis=(1, 2)) / total
+    return np.abs(own - mirror).sum(axis=(1, 2)) / total - noise
+
+
+def _point_reflection(a: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Each (K, S, S) window reflected through its point ``c`` (window coordinates), bilinearly."""
+    k, s, _ = a.shape
+    j = np.arange(s, dtype=np.float32)
+    rx = np.broadcast_to((2 * c[:, 0, None, None]).astype(np.float32) - j[None, None, :], a.shape)
+    ry = np.broadcast_to((2 * c[:, 1, None, None]).astype(np.float32) - j[None, :, None], a.shape)
+    ix, iy = np.floor(rx).astype(np.intp), np.floor(ry).astype(np.intp)
+    fx, fy = rx - ix, ry - iy
+    flat = np.concatenate([a.reshape(k, -1), np.zeros((k, 1), a.dtype)], axis=1)
+    rows = np.arange(k)[:, None, None]
+
+    def at(yy, xx):
+        ok = (xx >= 0) & (xx < s) & (yy >= 0) & (yy < s)
+        return flat[rows, np.where(ok, yy * s + xx, s * s)]
+
+    return ((1 - fy) * ((1 - fx) * at(iy, ix) + fx * at(iy, ix + 1))
+            + fy * ((1 - fx) * at(iy + 1, ix) + fx * at(iy + 1, ix + 1)))
+
+
+def _own_region(weight: np.ndarray, top: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """
+    Mask (K, S, S) of each window less the dark regions not connected to its centre.
+
+    Dark is a quarter of the spot's peak; light pixels (the dot's blurred
+    rim, paper) are kept. The spot's region is the one with the darkest
+    pixel within a pixel and a half of its centre. All windows are labelled
+    in one call, stacked with a blank row between them.
+    """
+    k, s, _ = weight.shape
+    dark = weight > 0.25 * np.maximum(top, 1e-6)[:, None, None]
+    stack = np.zeros((k, s + 1, s), dtype=np.uint8)
+    stack[:, :s] = dark
+    _, labels = cv2.connectedComponents(stack.reshape(k * (s + 1), s), connectivity=8)
+    labels = labels.reshape(k, s + 1, s)[:, :s]
+    j = np.arange(s)
+    near = (np.abs(j[None, None, :] - c[:, 0, None, None]) <= 1.5) \
+        & (np.abs(j[None, :, None] - c[:, 1, None, None]) <= 1.5)
+    best = np.argmax((weight * near).reshape(k, -1), axis=1)
+    own = labels.reshape(k, -1)[np.arange(k), best]
+    return ~((labels > 0) & (labels != own[:, None, None]))
+
+
+def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
+             major: np.ndarray, minor: np.ndarray, out: SpotMeasures) -> None:
+    """Per-channel darkness of every spot where that channel's image of it is."""
+    levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
+    table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
+    darkness = []
+    n = len(out.valid)
+    centroid = np.full((n, 3, 2), np.nan)
+    strength = np.zeros((n, 3))
+    for g in groups:
+        d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
+        darkness.append(d)
+        mask = (g.cell & g.window)[..., None]
+        wgt = np.maximum(d - 0.05, 0.0) * mask
+        total = wgt.sum(axis=(1, 2))                                           # (K, 3)
+        safe = np.maximum(total, 1e-6)
+        cx = (wgt * g.X[..., None]).sum(axis=(1, 2)) / safe
+        cy = (wgt * g.Y[..., None]).sum(axis=(1, 2)) / safe
+        centroid[g.index] = (np.stack([cx, cy], axis=-1) + g.base[:, None, :]) * g.scale + g.off
+        strength[g.index] = total * g.scale * g.scale
+    # The card's channel shifts: over the dots dark in a channel (its
+    # centroid is sure there), that channel's centroid minus the dot's.
+    limit = params.max_channel_shift_px
+    shift = np.zeros((3, 2))
+    for ch in range(3):
+        dark = out.valid & (strength[:, ch] >= 0.6 * strength.max(axis=1))
+        if np.count_nonzero(dark) >= 3:
+            shift[ch] = np.clip(np.median(centroid[dark, ch] - out.points[dark], axis=0),
+                                -limit, limit)
+    # Darkness of each channel over the inner part of the dot at its shift.
+    for g, d in zip(groups, darkness):
+        idx = g.index
+        inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / g.scale
+        for ch in range(3):
+            core = (g.ellipse(g.c + shift[ch] / g.scale, inner) <= 1.0) & g.cell
+            out.colour[idx, ch] = (d[..., ch] * core).sum(axis=(1, 2)) / np.maximum(
+                core.sum(axis=(1, 2)), 1)
+
+
+def _box3(a: np.ndarray) -> np.ndarray:
+    """3x3 mean of each (K, S, S) window (edges: the window's own pixels only)."""
+    k, s, _ = a.shape
+    flat = np.ascontiguousarray(a.reshape(k * s, s), dtype=np.float32)
+    return cv2.blur(flat, (3, 3), borderType=cv2.BORDER_REPLICATE).reshape(k, s, s)

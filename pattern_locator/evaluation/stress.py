@@ -233,10 +233,13 @@ def _condition_makers() -> Dict[str, Callable]:
 
     def interlace(rng, config):
         shift = float(rng.uniform(2.0, 10.0)) * (1 if rng.random() < 0.5 else -1)
-        # The head pans during each field's exposure too.
+        # The head pans during each field's exposure too. An analog camera's
+        # frame grabber delivers YUV 4:2:2 (chroma halved along the rows),
+        # not JPEG: JPEG would mix the two fields' colours in its 2x2 chroma.
         return {}, _imaging(rng, interlace_shift_px=shift,
                             motion_blur_px=abs(shift) * float(rng.uniform(0.2, 0.5)),
-                            motion_blur_angle_deg=0.0)
+                            motion_blur_angle_deg=0.0, jpeg_quality=None,
+                            chroma_blur_px=float(rng.choice([0.0, 1.0])))
 
     def far(rng, config):
         return {'distance': float(rng.uniform(5.5, 8.0))}, _imaging(rng)
@@ -526,18 +529,27 @@ def run_stress(per_camera: int = 10, seed: int = 1, quick: bool = False,
     cv2.setNumThreads(1)
     exact_memory_accounting()
     config = load_pattern_config()
-    n = 2 if quick else per_camera
-    print(f'pattern_locator bench --stress: {n} frames per condition and camera, seed {seed}, '
-          f'single-threaded')
+    n = 1 if quick else per_camera
     if quick:
-        print('(--quick: a smoke test; these figures are noise, not a measurement)')
+        print(f'pattern_locator bench --stress --quick: a SMOKE TEST ({n} frame per condition '
+              f'and camera); its figures are noise, not a measurement.')
+    else:
+        print(f'pattern_locator bench --stress: {n} frames per condition and camera, '
+              f'seed {seed}, single-threaded')
     rows = run_frames(make_frames(config, n, seed), config)
     print(stress_table(rows))
     print(targets_table(rows))
     if output_dir:
-        from .bench_plots import stress_time_plot
-        path = stress_time_plot(rows, output_dir, quick)
-        print(f'\ntime per frame plot: {path}')
+        from .bench_plots import time_plot
+
+        times = {}
+        for name, row in rows.items():
+            times[f'{name}: dots'] = [r.time_ms for r in row.dots]
+            times[f'{name}: AprilTag'] = [r.time_ms for r in row.april]
+        kind = 'bench_stress_quick' if quick else 'bench_stress'
+        path = time_plot(times, output_dir, kind, 'Time per frame under stress (single thread, '
+                                                  'pose included)')
+        print(f'\nplot: {path}')
     return 0
 
 

@@ -32,7 +32,7 @@ from ..card.pattern import PatternConfig, RING_POINTS
 MIN_CENTRE_AREA = 10.0
 MIN_NEIGHBOURS = 6
 # Grid cell (image pixels) of the evidence counts.
-_CELL = 8
+_CELL = 16
 # Candidates looked at more closely, per candidate examined.
 _SHORTLIST = 4
 
@@ -155,32 +155,22 @@ def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
     # perspective and blur); specks of noise are far smaller.
     near = np.flatnonzero((np.abs(du) < reach) & (np.abs(dv) < reach)
                           & (ratio < 1.2) & (ratio > 0.08))
-    to_unit = evecs @ np.diag(1.0 / semi) @ evecs.T
-    rel = np.column_stack([du[near], dv[near]]) @ to_unit.T
-    rho = np.hypot(rel[:, 0], rel[:, 1])
-    keep = (rho > 0.55 * ring_rho[-1]) & (rho < 1.6 * ring_rho[0])
-    near, rel, rho = near[keep], rel[keep], rho[keep]
     if len(near) < RING_POINTS - 2:
         return None
-    ang = np.arctan2(rel[:, 1], rel[:, 0])
-    slots = _vote_slots(rho, ang, ring_rho)
-    if slots is None:
-        return None
-    scale, phase = slots
-    # Assign each neighbour to (ring, slot) by its predicted position, best first.
-    k = np.round(wrap(ang - phase) / (np.pi / 4)).astype(int) % RING_POINTS
-    dang = np.abs(wrap(ang - (phase + k * np.pi / 4)))
-    n_rings = len(ring_rho)
-    dr = np.abs(rho[:, None] / (scale * ring_rho[None, :]) - 1.0)      # (N, R)
-    ring = np.argmin(dr, axis=1)
-    cost = dr[np.arange(len(near)), ring] + dang
-    ok = (dr[np.arange(len(near)), ring] < 0.25) & (dang < 0.35)
-    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
-    for i in np.flatnonzero(ok)[np.argsort(cost[ok])[::-1]]:
-        slot_blob[ring[i], k[i]] = near[i]          # the cheapest is written last
-    per_ring = np.count_nonzero(slot_blob >= 0, axis=1)
-    if per_ring.sum() < 8 or per_ring.max() < 5:
-        return None
+    offsets = np.column_stack([du[near], dv[near]])
+    for to_unit in _normalisers(evecs, semi, offsets, ring_rho):
+        slot_blob = _assign(offsets @ to_unit.T, near, ring_rho)
+        if slot_blob is not None:
+            guess = _verify(blobs, ci, slot_blob, config, params, camera)
+            if guess is not None:
+                return guess
+    return None
+
+
+def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
+            params: DetectorParams, camera: Optional[CameraModel]) -> Optional[CardGuess]:
+    """Fit the plane-to-image homography to the assigned blobs; None if it does not hold."""
+    n_rings = slot_blob.shape[0]
     # Slot order k increases clockwise in the image (v down) = clockwise on the
     # card seen from the front, unless the image is a mirror's (checked later).
     slot_xy = config.model_points()[1:, :2].reshape(n_rings, RING_POINTS, 2)
@@ -195,12 +185,62 @@ def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
                                 min_tolerance=0.75 * blobs.scale)
     if H is None:
         return None
+    slot_blob = slot_blob.copy()
     for (r, kk), good in zip(pos, inliers[:-1]):
         if not good:
             slot_blob[r, kk] = -1
-    if np.count_nonzero(slot_blob >= 0) < 7 or np.count_nonzero((slot_blob >= 0).any(axis=0)) < 5:
+    seen = slot_blob >= 0
+    if np.count_nonzero(seen) < 7 or np.count_nonzero(seen.any(axis=0)) < 5:
         return None
     return CardGuess(ci, slot_blob, H, blobs)
+
+
+def _normalisers(evecs: np.ndarray, semi: np.ndarray, offsets: np.ndarray,
+                 ring_rho: np.ndarray):
+    """
+    Maps taking the card's rings to circles of radii ``ring_rho``, best guess first.
+
+    First the centre blob's own ellipse to the unit circle. A small centre
+    blob (a far card) is a poor guide to its own shape; the ring dots
+    round it are a better one: the second moments of points spread evenly
+    on circles of radii R are R^2 / 2 along any axis, so the neighbours'
+    moments map back to circles too (their mean radius put at the rings').
+    """
+    yield evecs @ np.diag(1.0 / semi) @ evecs.T
+    cov = offsets.T @ offsets / len(offsets)
+    w, v = np.linalg.eigh(cov)
+    if w[0] > 0:
+        target = np.sqrt(np.mean(ring_rho ** 2) / 2.0)
+        yield v @ np.diag(target / np.sqrt(w)) @ v.T
+
+
+def _assign(rel: np.ndarray, near: np.ndarray, ring_rho: np.ndarray) -> Optional[np.ndarray]:
+    """Give neighbours (``rel``: in the rings-as-circles frame) their (ring, slot); None if few."""
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    keep = (rho > 0.55 * ring_rho[-1]) & (rho < 1.6 * ring_rho[0])
+    near, rel, rho = near[keep], rel[keep], rho[keep]
+    if len(near) < RING_POINTS - 2:
+        return None
+    ang = np.arctan2(rel[:, 1], rel[:, 0])
+    slots = _vote_slots(rho, ang, ring_rho)
+    if slots is None:
+        return None
+    scale, phase = slots
+    # Each neighbour to (ring, slot) by its predicted position, best first.
+    k = np.round(wrap(ang - phase) / (np.pi / 4)).astype(int) % RING_POINTS
+    dang = np.abs(wrap(ang - (phase + k * np.pi / 4)))
+    n_rings = len(ring_rho)
+    dr = np.abs(rho[:, None] / (scale * ring_rho[None, :]) - 1.0)      # (N, R)
+    ring = np.argmin(dr, axis=1)
+    cost = dr[np.arange(len(near)), ring] + dang
+    ok = (dr[np.arange(len(near)), ring] < 0.25) & (dang < 0.35)
+    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
+    for i in np.flatnonzero(ok)[np.argsort(cost[ok])[::-1]]:
+        slot_blob[ring[i], k[i]] = near[i]          # the cheapest is written last
+    per_ring = np.count_nonzero(slot_blob >= 0, axis=1)
+    if per_ring.sum() < 8 or per_ring.max() < 5:
+        return None
+    return slot_blob
 
 
 def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray

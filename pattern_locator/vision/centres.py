@@ -58,24 +58,43 @@ class SpotMeasures:
     inside: np.ndarray      # (P,) window fully inside the image
 
 
-def card_white(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
-               paper_xy: np.ndarray) -> Optional[np.ndarray]:
-    """Median colour (BGR, or grey) of the card's paper at plane points between the dots."""
+@dataclass(frozen=True)
+class Paper:
+    """The card's paper as the image shows it."""
+
+    colour: np.ndarray      # (3,) BGR, or (1,) grey: the card's white
+    sigma: float            # noise (grey levels, full resolution) of the darkest channel
+
+
+def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
+               paper_xy: np.ndarray) -> Optional[Paper]:
+    """
+    The card's white (median over plane points between the dots) and its noise.
+
+    The noise is measured there too, from each point's 3x3 neighbourhood:
+    next to a small card in a busy scene the image's local noise says more
+    about the scene than about the card.
+    """
     pts = apply_h(H, paper_xy)
     if camera is not None and camera.has_distortion:
         pts = camera.distort_pixels(pts)
     h, w = dot_image.image.shape[:2]
-    inside = (pts[:, 0] >= 1) & (pts[:, 0] < w - 1) & (pts[:, 1] >= 1) & (pts[:, 1] < h - 1)
+    inside = (pts[:, 0] >= 2) & (pts[:, 0] < w - 2) & (pts[:, 1] >= 2) & (pts[:, 1] < h - 2)
     pts = pts[inside]
     if len(pts) < 4:
         return None
     xs = np.round(pts[:, 0]).astype(int)
     ys = np.round(pts[:, 1]).astype(int)
-    samples = dot_image.image[ys, xs].astype(np.float32)
-    white = np.median(samples, axis=0)
+    d = np.arange(-1, 2)
+    patch = dot_image.image[ys[:, None, None] + d[None, :, None],
+                            xs[:, None, None] + d[None, None, :]].astype(np.float32)
+    white = np.median(patch[:, 1, 1], axis=0)
     if np.max(white) < dot_image.params.min_white:
         return None
-    return np.maximum(np.atleast_1d(white), 1.0)
+    darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
+    # Mean |pixel - 3x3 mean| is 0.84 sigma for white noise (8 of 9 parts).
+    spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(np.median(spread)) / 0.84)
 
 
 @dataclass(frozen=True)
@@ -151,6 +170,7 @@ class _Windows:
         self.pred = centre - self.base
         self.c = self.pred.copy()
         self.to_plane = (to_plane[index] * scale).astype(np.float32)     # metres per pixel
+        self._parts_key = None
 
     def to_image(self, c: np.ndarray) -> np.ndarray:
         """Window coordinates (K, 2) -> image pixels."""
@@ -158,14 +178,18 @@ class _Windows:
 
     def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
         """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
-        ax = self.axes
-        ca = (ax[:, 0, 0] * c[:, 0] + ax[:, 1, 0] * c[:, 1]).astype(np.float32)
-        cb = (ax[:, 0, 1] * c[:, 0] + ax[:, 1, 1] * c[:, 1]).astype(np.float32)
+        key = c.tobytes()
+        if self._parts_key != key:
+            ax = self.axes
+            ca = (ax[:, 0, 0] * c[:, 0] + ax[:, 1, 0] * c[:, 1]).astype(np.float32)
+            cb = (ax[:, 0, 1] * c[:, 0] + ax[:, 1, 1] * c[:, 1]).astype(np.float32)
+            a = self.A0 - ca[:, None, None]
+            b = self.B0 - cb[:, None, None]
+            self._parts, self._parts_key = (a * a, b * b), key
+        a2, b2 = self._parts
         sa = (1.0 / semi[:, 0] ** 2).astype(np.float32)[:, None, None]
         sb = (1.0 / semi[:, 1] ** 2).astype(np.float32)[:, None, None]
-        a = self.A0 - ca[:, None, None]
-        b = self.B0 - cb[:, None, None]
-        return a * a * sa + b * b * sb
+        return a2 * sa + b2 * sb
 
     def plane(self, anchor: np.ndarray, anchor_xy: np.ndarray):
         """Return each pixel's card-plane position; the spot at ``anchor`` is at ``anchor_xy``."""
@@ -198,14 +222,14 @@ class _Windows:
 
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
-                  layout: PlaneLayout, spots: np.ndarray, white: Optional[np.ndarray],
+                  layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
                   core_margin: Optional[float] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
-    ``H`` maps the plane (metres) to undistorted pixels. ``white`` is the
-    card's paper colour (:func:`card_white`), for the colours; None for grey
-    images or when no colour is wanted. The peak darkness is measured within
+    ``H`` maps the plane (metres) to undistorted pixels. ``paper`` is the
+    card's white and noise (:func:`card_paper`); ``colour``: measure the
+    colours too (not for grey images). The peak darkness is measured within
     the spot's image ellipse grown by ``core_margin`` pixels round where it
     should be (default: the largest channel shift, plus one).
     """
@@ -230,10 +254,11 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     U, sv, _ = np.linalg.svd(L)                                # axes of each spot's ellipse
     major = sv[:, 0] * radii
     minor = sv[:, 1] * radii
-    # Window: the spot's ellipse, 1.25 times as big plus a margin for blur
-    # and channel shift, along its own axes.
-    margin = 2.0 + params.max_channel_shift_px
-    semi = np.column_stack([1.25 * major + margin, 1.25 * minor + margin])
+    # Window: the spot's ellipse, 1.2 times as big plus a margin for blur
+    # and half the channel shift (the darkest channel is the union of the
+    # channels' dots), along its own axes.
+    margin = 2.0 + 0.5 * params.max_channel_shift_px
+    semi = np.column_stack([1.2 * major + margin, 1.2 * minor + margin])
     h, w = dot_image.image.shape[:2]
     # A degenerate homography would ask for windows bigger than the image:
     # memory stays bounded by the image, nothing is measured.
@@ -246,26 +271,27 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
               for index, scale in ((np.flatnonzero(~big), 1),
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
-        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, params,
+        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper.sigma, params,
                     core_margin, out)
     blur = _blur(groups, U, major, minor, out.valid)
     for g in groups:
         _last_pass(g, layout, spots, blur, major, minor, pred, out)
-    if white is not None and dot_image.image.ndim == 3:
-        _colours(groups, white, params, major, minor, out)
+    if colour and dot_image.image.ndim == 3:
+        _colours(groups, paper.colour, params, major, minor, out)
     return out
 
 
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
-                params: DetectorParams, core_margin: float, out: SpotMeasures) -> None:
+                noise: float, params: DetectorParams, core_margin: float,
+                out: SpotMeasures) -> None:
     """Centroid in a generous window, and the tests of a dot, written into ``out``."""
     idx, s = g.index, g.scale
     pixels = g.pixels
     dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
-    sigma = (dot_image.noise_at(pred[idx, 0], pred[idx, 1]) / s).astype(np.float32)
+    sigma = np.full(len(idx), noise / s, dtype=np.float32)
     floor = np.maximum(0.04 * level, 2.0 * sigma)
     weight = np.maximum((level - floor)[:, None, None] - dark, 0.0)
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
@@ -398,7 +424,7 @@ def _asymmetry(g: _Windows, weight: np.ndarray, region: np.ndarray, c: np.ndarra
     of two noisy pixels| is 1.13 sigma on average).
     """
     region = region.astype(np.float32)
-    both = region * (_point_reflection(region, c) > 0.99)
+    both = region * (_point_reflection(region, c, nearest=True) > 0.5)
     own = weight * both
     mirror = _point_reflection(weight, c) * both
     total = np.maximum((own + mirror).sum(axis=(1, 2)), 1e-6)
@@ -406,23 +432,33 @@ def _asymmetry(g: _Windows, weight: np.ndarray, region: np.ndarray, c: np.ndarra
     return np.abs(own - mirror).sum(axis=(1, 2)) / total - noise
 
 
-def _point_reflection(a: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Each (K, S, S) window reflected through its point ``c`` (window coordinates), bilinearly."""
+def _point_reflection(a: np.ndarray, c: np.ndarray, nearest: bool = False) -> np.ndarray:
+    """
+    Each (K, S, S) window reflected through its point ``c`` (window coordinates); 0 outside.
+
+    Bilinear (the interpolation weights are the same for every pixel of a
+    window, and separable: rows, then columns), or to the nearest pixel.
+    """
     k, s, _ = a.shape
-    j = np.arange(s, dtype=np.float32)
-    rx = np.broadcast_to((2 * c[:, 0, None, None]).astype(np.float32) - j[None, None, :], a.shape)
-    ry = np.broadcast_to((2 * c[:, 1, None, None]).astype(np.float32) - j[None, :, None], a.shape)
-    ix, iy = np.floor(rx).astype(np.intp), np.floor(ry).astype(np.intp)
-    fx, fy = rx - ix, ry - iy
-    flat = np.concatenate([a.reshape(k, -1), np.zeros((k, 1), a.dtype)], axis=1)
-    rows = np.arange(k)[:, None, None]
+    j = np.arange(s)
+    out = a
+    for axis, coord in ((1, c[:, 1]), (2, c[:, 0])):
+        pos = 2.0 * coord[:, None] - j[None, :]                        # (K, S)
+        base = np.floor(pos + (0.5 if nearest else 0.0)).astype(np.intp)
+        shape = (k, s, 1) if axis == 1 else (k, 1, s)
 
-    def at(yy, xx):
-        ok = (xx >= 0) & (xx < s) & (yy >= 0) & (yy < s)
-        return flat[rows, np.where(ok, yy * s + xx, s * s)]
+        def pick(index, src=out, shape=shape, axis=axis):
+            ok = ((index >= 0) & (index < s)).reshape(shape)
+            got = np.take_along_axis(src, np.broadcast_to(
+                np.clip(index, 0, s - 1).reshape(shape), src.shape), axis=axis)
+            return got * ok
 
-    return ((1 - fy) * ((1 - fx) * at(iy, ix) + fx * at(iy, ix + 1))
-            + fy * ((1 - fx) * at(iy + 1, ix) + fx * at(iy + 1, ix + 1)))
+        if nearest:
+            out = pick(base)
+        else:
+            f = (pos - base).astype(np.float32).reshape(shape)
+            out = (1 - f) * pick(base) + f * pick(base + 1)
+    return out
 
 
 def _own_region(weight: np.ndarray, top: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -450,41 +486,27 @@ def _own_region(weight: np.ndarray, top: np.ndarray, c: np.ndarray) -> np.ndarra
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
              major: np.ndarray, minor: np.ndarray, out: SpotMeasures) -> None:
-    """Per-channel darkness of every spot where that channel's image of it is."""
+    """
+    Per-channel darkness of every spot, where that channel's image of it is.
+
+    Each channel's darkness (linear light against the card's white) is
+    averaged over 3x3 pixels and its peak taken within the dot grown by the
+    largest channel shift: a channel displaced by a pixel or two has its
+    peak displaced, not lowered. The window is shared with the neighbours
+    as the card's plane is, so no neighbour's colour comes in.
+    """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
     table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
-    darkness = []
-    n = len(out.valid)
-    centroid = np.full((n, 3, 2), np.nan)
-    strength = np.zeros((n, 3))
     for g in groups:
-        d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
-        darkness.append(d)
-        mask = (g.cell & g.window)[..., None]
-        wgt = np.maximum(d - 0.05, 0.0) * mask
-        total = wgt.sum(axis=(1, 2))                                           # (K, 3)
-        safe = np.maximum(total, 1e-6)
-        cx = (wgt * g.X[..., None]).sum(axis=(1, 2)) / safe
-        cy = (wgt * g.Y[..., None]).sum(axis=(1, 2)) / safe
-        centroid[g.index] = (np.stack([cx, cy], axis=-1) + g.base[:, None, :]) * g.scale + g.off
-        strength[g.index] = total * g.scale * g.scale
-    # The card's channel shifts: over the dots dark in a channel (its
-    # centroid is sure there), that channel's centroid minus the dot's.
-    limit = params.max_channel_shift_px
-    shift = np.zeros((3, 2))
-    for ch in range(3):
-        dark = out.valid & (strength[:, ch] >= 0.6 * strength.max(axis=1))
-        if np.count_nonzero(dark) >= 3:
-            shift[ch] = np.clip(np.median(centroid[dark, ch] - out.points[dark], axis=0),
-                                -limit, limit)
-    # Darkness of each channel over the inner part of the dot at its shift.
-    for g, d in zip(groups, darkness):
         idx = g.index
-        inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / g.scale
-        for ch in range(3):
-            core = (g.ellipse(g.c + shift[ch] / g.scale, inner) <= 1.0) & g.cell
-            out.colour[idx, ch] = (d[..., ch] * core).sum(axis=(1, 2)) / np.maximum(
-                core.sum(axis=(1, 2)), 1)
+        k, size = g.pixels.shape[:2]
+        d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
+        smooth = cv2.blur(np.ascontiguousarray(d.reshape(k * size, size, 3)), (3, 3),
+                          borderType=cv2.BORDER_REPLICATE).reshape(d.shape)
+        grown = np.column_stack([major[idx], minor[idx]]) / g.scale \
+            + params.max_channel_shift_px / g.scale + 0.5
+        core = (g.ellipse(g.c, grown) <= 1.0) & g.cell
+        out.colour[idx] = (smooth * core[..., None]).max(axis=(1, 2))
 
 
 def _box3(a: np.ndarray) -> np.ndarray:

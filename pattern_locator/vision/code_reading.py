@@ -8,11 +8,12 @@ direction, so dots are compared by direction. The four inks' directions
 are known from the configuration; the camera's own colour response (channel
 gains, and the overlap of its colour filters that makes colours greyer) is
 fitted to the ring's dots, and every ink seen on the ring is then
-represented by its own dots. Every dot takes the nearest ink, and must be
-clearly nearer to it than to the next: a margin measured as a fraction of
-the way from the midpoint between the two inks to the nearest one. Point 1
-is the one black slot; black must also be as dark as ink (a grey object is
-not). Both rings must agree. A card whose colours are unclear is rejected,
+represented by its own dots. Every dot takes the nearest ink; both rings
+must agree, and each slot (its dots of both rings together) and the centre
+must be clearly nearer to their ink than to the next: a margin measured as
+a fraction of the way from the midpoint between the two inks to the
+nearest one. Point 1 is the one black slot; black must also be as dark as
+ink (a grey object is not). A card whose colours are unclear is rejected,
 never guessed.
 
 A mirror shows the ring in the other order, which reads as another valid
@@ -53,12 +54,14 @@ def ink_darkness(config: PatternConfig) -> np.ndarray:
 
 
 def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: PatternConfig,
-              params: DetectorParams) -> Optional[Reading]:
+              params: DetectorParams, white: Optional[np.ndarray] = None) -> Optional[Reading]:
     """
     Read the code from dot colours in slot order (row 0 the centre, then ring r slot k).
 
     ``colour`` holds each dot's per-channel darkness (:class:`SpotMeasures`
-    ``colour``); ``valid`` which dots were measured. None when unsure.
+    ``colour``); ``valid`` which dots were measured; ``white`` the card's
+    paper as the camera gave it (BGR), whose colour is the light's. None
+    when unsure.
     """
     n_ring_dots = n_rings * RING_POINTS
     colour = np.asarray(colour, dtype=float)
@@ -72,7 +75,11 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     ring_rows = 1 + np.flatnonzero(ring_valid.ravel())
     # The camera's response, fitted to the ring's dots, is undone on every
     # dot; inks seen on the ring are then represented by their own dots.
-    response = _fit_response(darkness[ring_rows], ink_darkness(config))
+    light = np.ones(3)
+    if white is not None and np.size(white) == 3:
+        light = srgb_to_linear(np.clip(np.asarray(white, dtype=float), 1.0, 255.0))
+        light = light / light.mean()
+    response = _fit_response(darkness[ring_rows], ink_darkness(config), light)
     seen = response.correct(darkness)
     unit = seen / np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-9)
     refs = response.inks.copy()
@@ -100,8 +107,15 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     if len(black) != 1:
         return None
     point1 = int(black[0])
-    used = np.concatenate([[0], rows[ring_valid]])
-    if np.any(margin[used] < params.min_colour_margin):
+    # Each slot decided on the evidence of both rings: their dots' colour
+    # directions averaged (a dot alone is noisier), with a margin.
+    slot_unit = np.where(ring_valid[:, :, None], unit[rows], 0.0).sum(axis=0)
+    slot_unit /= np.linalg.norm(slot_unit, axis=1, keepdims=True)
+    slot_pick, slot_margin = _classify(slot_unit, refs)
+    if np.any(slot_pick != agreed):
+        return None
+    margins = np.append(slot_margin, margin[0])
+    if np.any(margins < params.min_colour_margin):
         return None
     k_rows = rows[:, point1][ring_valid[:, point1]]
     k_dark = float(np.mean(darkness[k_rows]))
@@ -116,7 +130,7 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
         return None
     ring_codes = tuple('K' + ''.join(LETTERS[slot_letter[r, k]] if slot_letter[r, k] >= 0
                                      else '?' for k in slots[1:]) for r in range(n_rings))
-    return Reading(point1, code, float(np.min(margin[used])), ring_codes,
+    return Reading(point1, code, float(np.min(margins)), ring_codes,
                    tuple(int(r) for r in rows[grey]))
 
 
@@ -149,13 +163,16 @@ class _Response:
         return 1.0 - (1.0 - darkness) / self.white_error[None, :]
 
 
-def _fit_response(darkness: np.ndarray, inks: np.ndarray) -> _Response:
+def _fit_response(darkness: np.ndarray, inks: np.ndarray,
+                  light: np.ndarray = np.ones(3)) -> _Response:
     """
     Fit the camera's colour response to the ring's dots (darkness (N, 3), linear).
 
     Blur mixes a dot with paper: darkness ``a * d`` for the ink's ``d``. The
     sensor's colour filters overlap: each channel sees ``1 - t`` of its own
-    light and ``t / 2`` of each other's, ``d -> M(t) d``. And the card's
+    light and ``t / 2`` of each other's, ``d -> M(t) d``, each weighted by
+    the light's colour (``light``, the paper's linear BGR) since the overlap
+    comes before white balance. And the card's
     white, measured on the paper, may be off in a channel by a factor
     (clipped by a strong light in that channel, or lit unevenly): then the
     measured darkness is ``1 - w (1 - a M(t) d)``, which takes much of a
@@ -164,29 +181,34 @@ def _fit_response(darkness: np.ndarray, inks: np.ndarray) -> _Response:
     ``a`` per dot and ``w`` per channel are fitted by alternating least
     squares; the ``t`` that explains the dots best wins.
     """
-    best, best_err = None, np.inf
-    light = 1.0 - darkness                                       # (N, 3)
-    for t in _CROSSTALK:
-        mix = np.full((3, 3), t / 2.0) + np.eye(3) * (1.0 - 1.5 * t)
-        mixed = inks @ mix.T                                     # (4, 3)
-        unit_inks = mixed / np.linalg.norm(mixed, axis=1, keepdims=True)
-        w = np.ones(3)
-        for _ in range(2):
-            seen = 1.0 - light / w[None, :]
-            unit = seen / np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-9)
-            p = mixed[np.argmax(unit @ unit_inks.T, axis=1)]          # (N, 3)
-            for _ in range(3):
-                # a per dot, given w: 1 - light / w = a p.
-                a = np.clip(np.sum(p * seen, axis=1) / np.sum(p * p, axis=1), 0.05, 1.2)
-                # w per channel, given a: light = w (1 - a p).
-                q = 1.0 - a[:, None] * p
-                w = np.clip(np.sum(light * q, axis=0) / np.maximum(np.sum(q * q, axis=0), 1e-9),
-                            0.5, 3.0)
-                seen = 1.0 - light / w[None, :]
-        err = float(np.sum((light - w[None, :] * (1.0 - a[:, None] * p)) ** 2))
-        if err < best_err:
-            best, best_err = _Response(w, unit_inks), err
-    return best
+    lit = 1.0 - darkness                                         # (N, 3)
+    t = _CROSSTALK[:, None, None]                                # all t at once: (T, 1, 1)
+    mix = t / 2.0 + np.eye(3)[None] * (1.0 - 1.5 * t)            # (T, 3, 3)
+    # The overlap happens before white balance: a channel takes in its
+    # neighbours' light in proportion to how much of it there is, which the
+    # paper's own colour tells.
+    mix = mix * light[None, None, :]
+    mix /= mix.sum(axis=2, keepdims=True)
+    mixed = np.einsum('kc,tdc->tkd', inks, mix)                  # (T, 4, 3)
+    unit_inks = mixed / np.linalg.norm(mixed, axis=2, keepdims=True)
+    w = np.ones((len(_CROSSTALK), 1, 3))
+    rows = np.arange(len(_CROSSTALK))[:, None]
+    for _ in range(2):
+        seen = 1.0 - lit[None] / w                             # (T, N, 3)
+        unit = seen / np.maximum(np.linalg.norm(seen, axis=2, keepdims=True), 1e-9)
+        nearest = np.argmax(np.einsum('tnc,tkc->tnk', unit, unit_inks), axis=2)    # (T, N)
+        p = mixed[rows, nearest]                                 # (T, N, 3)
+        for _ in range(3):
+            # a per dot, given w: 1 - light / w = a p.
+            a = np.clip(np.sum(p * seen, axis=2) / np.sum(p * p, axis=2), 0.05, 1.2)
+            # w per channel, given a: light = w (1 - a p).
+            q = 1.0 - a[..., None] * p
+            w = np.clip(np.sum(lit[None] * q, axis=1, keepdims=True)
+                        / np.maximum(np.sum(q * q, axis=1, keepdims=True), 1e-9), 0.5, 3.0)
+            seen = 1.0 - lit[None] / w
+    err = np.sum((lit[None] - w * (1.0 - a[..., None] * p)) ** 2, axis=(1, 2))
+    best = int(np.argmin(err))
+    return _Response(w[best, 0], unit_inks[best])
 
 
 def handedness(marks: SpotMeasures, black_peak: float) -> str:

@@ -29,7 +29,7 @@ import numpy as np
 from .camera import CameraModel
 from .cards import (apply_h, CardGuess, fit_homography, group, rank_candidates,
                     rotation_about_z)
-from .centres import card_white, measure_spots, plane_layout, SpotMeasures
+from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
 from .code_reading import handedness, read_code, Reading
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
@@ -166,11 +166,11 @@ class Detector:
         cfg, params = self.config, self.params
         n_rings = cfg.n_rings
         H = guess.homography
-        white = card_white(dot_image, camera, H, self._paper_xy)
-        if white is None:
+        paper = card_paper(dot_image, camera, H, self._paper_xy)
+        if paper is None:
             return None
-        colour_white = None if dot_image.grey_only else white
-        spots = measure_spots(dot_image, camera, H, self._dot_layout, self._dots, colour_white)
+        spots = measure_spots(dot_image, camera, H, self._dot_layout, self._dots, paper,
+                              colour=not dot_image.grey_only)
         H, valid = self._refit(spots, camera)
         if H is None:
             return None
@@ -181,7 +181,7 @@ class Detector:
                 return None
             point1, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
         else:
-            reading = read_code(spots.colour, valid, n_rings, cfg, params)
+            reading = read_code(spots.colour, valid, n_rings, cfg, params, paper.colour)
             if reading is None:
                 return None
             point1 = reading.point1_slot
@@ -195,7 +195,7 @@ class Detector:
                 return None
         H_final = H @ rotation_about_z(point1 * np.pi / 4)
         if not dot_image.grey_only and cfg.handedness_mark is not None:
-            if not self._handed(dot_image, camera, H_final, white, spots, valid, reading):
+            if not self._handed(dot_image, camera, H_final, paper, spots, valid, reading):
                 return None
         # Slot order -> dot order (point 1 first).
         order = np.zeros(cfg.n_dots, dtype=int)
@@ -235,12 +235,12 @@ class Detector:
         return H, valid
 
     def _handed(self, dot_image: DotImage, camera: Optional[CameraModel], H_final: np.ndarray,
-                white: np.ndarray, spots: SpotMeasures, valid: np.ndarray,
+                paper: Paper, spots: SpotMeasures, valid: np.ndarray,
                 reading: Reading) -> bool:
         """Tell whether the handedness marks show the card itself (not its mirror image)."""
         cfg = self.config
-        marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, None,
-                              core_margin=1.0)
+        marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, paper,
+                              colour=False, core_margin=1.0)
         rows = 1 + reading.point1_slot + RING_POINTS * np.arange(cfg.n_rings)
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:

@@ -185,26 +185,32 @@ def _fit_response(darkness: np.ndarray, inks: np.ndarray,
     t = _CROSSTALK[:, None, None]                                # all t at once: (T, 1, 1)
     mix = t / 2.0 + np.eye(3)[None] * (1.0 - 1.5 * t)            # (T, 3, 3)
     # The overlap happens before white balance: a channel takes in its
-    # neighbours' light in proportion to how much of it there is, which the
-    # paper's own colour tells.
-    mix = mix * light[None, None, :]
+    # neighbours' light in proportion to how much of it there is. The
+    # paper's colour as seen has been through the overlap too: undo it.
+    lights = np.clip(np.linalg.solve(mix, np.broadcast_to(light, (len(mix), 3))[..., None])[..., 0],
+                     0.05 * light.max(), None)                     # (T, 3)
+    mix = mix * lights[:, None, :]
     mix /= mix.sum(axis=2, keepdims=True)
     mixed = np.einsum('kc,tdc->tkd', inks, mix)                  # (T, 4, 3)
     unit_inks = mixed / np.linalg.norm(mixed, axis=2, keepdims=True)
     w = np.ones((len(_CROSSTALK), 1, 3))
     rows = np.arange(len(_CROSSTALK))[:, None]
-    for _ in range(2):
+    for step in range(2):
         seen = 1.0 - lit[None] / w                             # (T, N, 3)
         unit = seen / np.maximum(np.linalg.norm(seen, axis=2, keepdims=True), 1e-9)
         nearest = np.argmax(np.einsum('tnc,tkc->tnk', unit, unit_inks), axis=2)    # (T, N)
         p = mixed[rows, nearest]                                 # (T, N, 3)
+        # The white's error needs three inks on the ring to be told from the
+        # inks' own colours (a ring of one colour and black cannot).
+        free = np.array([len(set(row)) >= 3 for row in nearest.tolist()])[:, None, None]
         for _ in range(3):
             # a per dot, given w: 1 - light / w = a p.
             a = np.clip(np.sum(p * seen, axis=2) / np.sum(p * p, axis=2), 0.05, 1.2)
             # w per channel, given a: light = w (1 - a p).
             q = 1.0 - a[..., None] * p
-            w = np.clip(np.sum(lit[None] * q, axis=1, keepdims=True)
-                        / np.maximum(np.sum(q * q, axis=1, keepdims=True), 1e-9), 0.5, 3.0)
+            fitted = np.clip(np.sum(lit[None] * q, axis=1, keepdims=True)
+                             / np.maximum(np.sum(q * q, axis=1, keepdims=True), 1e-9), 0.5, 3.0)
+            w = np.where(free, fitted, 1.0)
             seen = 1.0 - lit[None] / w
     err = np.sum((lit[None] - w * (1.0 - a[..., None] * p)) ** 2, axis=(1, 2))
     best = int(np.argmin(err))

@@ -47,15 +47,18 @@ class CardGuess:
     blobs: Blobs
 
 
-def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams
-                    ) -> np.ndarray:
+def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
+                    noise: Optional[np.ndarray] = None) -> np.ndarray:
     """
     Return candidate centre blobs (indices), strongest evidence first, max_candidates at most.
 
     Evidence is the number of blobs between 0.06 and 1 times a blob's area
     within reach of its outer ring (1.5 times the ring's radius for a centre
     of its extent, which covers tilts to 75 degrees), counted with summed
-    area tables over a coarse grid, one per octave of blob area.
+    area tables over a coarse grid, one per octave of blob area; counts
+    beyond a card's are not more evidence, and ties go to the blob in the
+    quietest surroundings (``noise``, per blob). When many remain, the
+    shortlist is ranked by how ring-like its neighbours are.
     """
     n = len(blobs)
     if n < 1 + MIN_NEIGHBOURS:
@@ -93,14 +96,19 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams
     evidence = box(hi) - box(lo) - 1
     strong = evidence >= MIN_NEIGHBOURS
     idx, evidence = idx[strong], evidence[strong]
-    order = np.lexsort((-area[idx], -evidence))
+    # A card's two rings and its marks make 18 neighbours: more say a crowd
+    # (texture, foliage), not more card. Among the crowded, the quietest
+    # surroundings first: a card's paper is smooth.
+    quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
+    order = np.lexsort((-area[idx], quiet, -np.minimum(evidence, 2 * RING_POINTS + 2)))
     idx = idx[order[:_SHORTLIST * params.max_candidates]]
     if len(idx) <= params.max_candidates:
         return idx
     # Many blobs crowd the shortlist (a textured floor, foliage): a card's
     # ring dots are alike in size and all round their centre.
     score = _ring_evidence(blobs, idx, reach)
-    return idx[np.argsort(-score, kind='stable')[:params.max_candidates]]
+    quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
+    return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
 
 
 def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarray:
@@ -108,8 +116,10 @@ def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarr
     How much the blobs round each candidate look like a card's rings.
 
     The neighbours within reach (found through the blobs sorted by column,
-    so each candidate costs the blobs in its own reach) that are of one size
-    (within a factor 1.6 of their median), and the octants they cover.
+    so each candidate costs the blobs in its own reach) of a ring dot's size
+    (a third of the centre's, give or take perspective and blur) that are of
+    one size (within a factor 1.6 of their median), and the octants they
+    cover.
     """
     order = np.argsort(blobs.u, kind='stable')
     su = blobs.u[order]
@@ -120,7 +130,7 @@ def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarr
         near = order[lo:hi]
         dv = blobs.v[near] - blobs.v[ci]
         ratio = blobs.area[near] / blobs.area[ci]
-        keep = (np.abs(dv) < r) & (ratio > 0.04) & (ratio < 1.2)
+        keep = (np.abs(dv) < r) & (ratio > 0.12) & (ratio < 0.9)
         near, dv = near[keep], dv[keep]
         if len(near) < MIN_NEIGHBOURS:
             continue
@@ -261,10 +271,14 @@ def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray
     dang = wrap(ang[None, :] - phase[:, None])                      # (A, N)
     dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
     r_exp = scale[:, None, None] * ring_rho[None, None, :]          # (A, 1, R)
-    on_ring = np.abs(rho[None, :, None] - r_exp) < 0.2 * r_exp      # (A, N, R)
-    count = np.count_nonzero(on_ring.any(axis=2) & (dslot < 0.3), axis=1)
-    # Among equal counts, the scale the centre dot's own size predicts (1).
-    best = int(np.argmax(count - 0.5 * np.abs(np.log(scale))))
+    dr = np.min(np.abs(rho[None, :, None] / r_exp - 1.0), axis=2)  # (A, N)
+    on_ring = (dr < 0.2) & (dslot < 0.3)
+    count = np.count_nonzero(on_ring, axis=1)
+    # Soft agreement: a card's dots sit on their rings and slots to within a
+    # few percent and degrees; blobs of a textured floor round a centre only
+    # roughly. Among equal scores, the scale the centre's own size predicts.
+    fit = np.sum(on_ring * np.exp(-(dslot / 0.15) ** 2 - (dr / 0.1) ** 2), axis=1)
+    best = int(np.argmax(fit - 0.5 * np.abs(np.log(scale))))
     if count[best] < RING_POINTS - 2:
         return None
     return float(scale[best]), float(phase[best])

@@ -51,7 +51,8 @@ class SpotMeasures:
 
     points: np.ndarray      # (P, 2) measured centres, image pixels
     predicted: np.ndarray   # (P, 2) where the homography put them
-    valid: np.ndarray       # (P,) measured and dot-like
+    valid: np.ndarray       # (P,) measured and dot-like: its centre may be used
+    readable: np.ndarray    # (P,) its colour may be read (valid, or a clean inner part)
     peak: np.ndarray        # (P,) darkest-channel peak darkness / local white (0..1)
     colour: np.ndarray      # (P, 3) per-channel darkness, linear, BGR (NaN if grey)
     area: np.ndarray        # (P,) equivalent area of the dot, pixels
@@ -92,9 +93,9 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     if np.max(white) < dot_image.params.min_white:
         return None
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
-    # Mean |pixel - 3x3 mean| is 0.84 sigma for white noise (8 of 9 parts).
+    # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(np.median(spread)) / 0.84)
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(np.median(spread)) / 0.75)
 
 
 @dataclass(frozen=True)
@@ -249,8 +250,9 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
         L = np.stack([dx, dy], axis=2) @ L
     else:
         pred = und
-    out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool), np.zeros(n),
-                       np.full((n, 3), np.nan), np.zeros(n), np.zeros(n, dtype=bool))
+    out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool),
+                       np.zeros(n, dtype=bool), np.zeros(n), np.full((n, 3), np.nan), np.zeros(n),
+                       np.zeros(n, dtype=bool))
     U, sv, _ = np.linalg.svd(L)                                # axes of each spot's ellipse
     major = sv[:, 0] * radii
     minor = sv[:, 1] * radii
@@ -331,6 +333,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     out.inside[idx] = whole
     out.points[idx] = g.to_image(c)
     out.valid[idx] = whole & dark_enough & isolated & sized
+    g.tests = {'whole': whole, 'dark': dark_enough, 'isolated': isolated, 'sized': sized}
     out.peak[idx] = relative
     out.area[idx] = equivalent
     # Spread of each spot's darkness (image pixels^2), for the blur.
@@ -392,6 +395,7 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     # the connected one at its centre.
     connected = _own_region(weight, g.top, c)
     weight = weight * connected
+    g.connected = connected
     for _ in range(2):
         c = g.centroid(weight * (g.ellipse(c, tight) <= 1.0), c)
     region = g.ellipse(c, tight) <= 1.0
@@ -406,7 +410,24 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     beyond = g.window & mine & (g.ellipse(c, tight + 1.0) > 1.0)
     stained = np.count_nonzero(beyond & (weight > 0.25 * g.top[:, None, None]), axis=(1, 2))
     touched = stained > 0.1 * np.count_nonzero(beyond, axis=(1, 2)) + 1
+    exists = out.valid[idx].copy()
     out.valid[idx] &= steady & (g.asymmetry <= 0.08 + grid) & ~touched
+    g.tests.update(steady=steady, symmetric=g.asymmetry <= 0.08 + grid, untouched=~touched)
+    # Its colour may still be read where the geometry may not: a dot touched
+    # by an object, or with an object over part of its rim, has a clean
+    # inner part (ink is even there). Too small a dot to tell: not read.
+    inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / s
+    core = (g.ellipse(g.pred, inner) <= 1.0) & mine
+    count = np.maximum(core.sum(axis=(1, 2)), 1)
+    mean = (g.weight * core).sum(axis=(1, 2)) / count
+    spread = np.sqrt(np.maximum((g.weight ** 2 * core).sum(axis=(1, 2)) / count - mean ** 2, 0))
+    # Evenness against the dots that passed everything (same blur, same size).
+    relative = spread / np.maximum(mean, 1e-6)
+    typical = np.median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
+        else 0.0
+    even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
+    out.readable[idx] = out.valid[idx] | (exists & steady & even)
+    g.tests.update(even=even, spread=relative)
     g.c = c
 
 
@@ -490,10 +511,11 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     Per-channel darkness of every spot, where that channel's image of it is.
 
     Each channel's darkness (linear light against the card's white) is
-    averaged over 3x3 pixels and its peak taken within the dot grown by the
-    largest channel shift: a channel displaced by a pixel or two has its
-    peak displaced, not lowered. The window is shared with the neighbours
-    as the card's plane is, so no neighbour's colour comes in.
+    averaged over 3x3 pixels and its peak taken within the dot's inner part
+    grown by the largest channel shift: a channel displaced by a pixel or
+    two has its peak displaced, not lowered. The window is shared with the
+    neighbours as the card's plane is, and dark things not joined to the dot
+    are left out, so no neighbour's or object's colour comes in.
     """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
     table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
@@ -503,10 +525,26 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
         d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
         smooth = cv2.blur(np.ascontiguousarray(d.reshape(k * size, size, 3)), (3, 3),
                           borderType=cv2.BORDER_REPLICATE).reshape(d.shape)
-        grown = np.column_stack([major[idx], minor[idx]]) / g.scale \
-            + params.max_channel_shift_px / g.scale + 0.5
-        core = (g.ellipse(g.c, grown) <= 1.0) & g.cell
+        # The dot's inner part grown by the shift, clear of anything beside
+        # the dot; for a dot touched by something, not grown (and around
+        # where it should be).
+        sure = out.valid[idx][:, None]
+        inner = 0.6 * np.column_stack([major[idx], minor[idx]]) + 0.7
+        grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
+        at = np.where(sure, g.c, g.pred)
+        core = (g.ellipse(at, grown) <= 1.0) & g.cell & g.connected
         out.colour[idx] = (smooth * core[..., None]).max(axis=(1, 2))
+        # A dot read for its colour alone must be even in every channel
+        # there, as the sure dots are: not half ink, half something else.
+        doubtful = out.readable[idx] & ~out.valid[idx]
+        if np.any(doubtful):
+            count = np.maximum(core.sum(axis=(1, 2)), 1)[:, None]
+            mean = (d * core[..., None]).sum(axis=(1, 2)) / count
+            var = (d * d * core[..., None]).sum(axis=(1, 2)) / count - mean ** 2
+            spread = np.sqrt(np.maximum(var, 0.0)).max(axis=1)
+            typical = np.median(spread[out.valid[idx]]) if np.count_nonzero(
+                out.valid[idx]) >= 3 else 0.0
+            out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
 
 
 def _box3(a: np.ndarray) -> np.ndarray:

@@ -128,8 +128,8 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
         code = Code.parse(text)
     except CodeError:
         return None
-    ring_codes = tuple('K' + ''.join(LETTERS[slot_letter[r, k]] if slot_letter[r, k] >= 0
-                                     else '?' for k in slots[1:]) for r in range(n_rings))
+    ring_codes = tuple(''.join(LETTERS[slot_letter[r, k]] if slot_letter[r, k] >= 0 else '?'
+                               for k in slots) for r in range(n_rings))
     return Reading(point1, code, float(np.min(margins)), ring_codes,
                    tuple(int(r) for r in rows[grey]))
 

@@ -102,7 +102,8 @@ class Detector:
         blobs = dot_image.blobs
         claimed = np.zeros(len(blobs), dtype=bool)
         cards = []
-        for ci in rank_candidates(blobs, self.config, self.params):
+        for ci in rank_candidates(blobs, self.config, self.params,
+                                  dot_image.noise_at(blobs.u, blobs.v)):
             if claimed[ci]:
                 continue
             card = None
@@ -181,7 +182,10 @@ class Detector:
                 return None
             point1, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
         else:
-            reading = read_code(spots.colour, valid, n_rings, cfg, params, paper.colour)
+            # Colours of the dots kept by the refit, and of those whose inner
+            # part is clean though their rim is not (an object beside them).
+            readable = valid | (spots.readable & ~spots.valid)
+            reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour)
             if reading is None:
                 return None
             point1 = reading.point1_slot

@@ -198,7 +198,11 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
 def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> np.ndarray:
     """Grey level below which a pixel is dot, from the local white and noise."""
     white = np.asarray(white, dtype=np.float32)
-    margin = np.maximum((1.0 - params.dark_ratio) * white, params.noise_factor * noise)
+    # Ink is at least half as dark as the paper is bright, whatever the
+    # noise: a card next to a busy scene (where the noise is measured) keeps
+    # its dots.
+    margin = np.maximum((1.0 - params.dark_ratio) * white,
+                        np.minimum(params.noise_factor * noise, 0.5 * white))
     margin = np.maximum(margin, 2.0)
     threshold = np.where(white >= params.min_white, white - margin, 0.0)
     return np.clip(threshold, 0, 255).astype(np.uint8)

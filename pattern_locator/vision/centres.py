@@ -214,11 +214,16 @@ class _Windows:
         return inside & (owner == spot[:, None, None]), qx, qy
 
     def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:
-        total = weight.sum(axis=(1, 2))
+        """Weighted centroid of each window (``c`` where a window has no weight)."""
+        # Column and row sums: two passes over the windows instead of three
+        # products and three sums.
+        columns = weight.sum(axis=1)                                 # (K, S)
+        rows = weight.sum(axis=2)
+        total = columns.sum(axis=1)
         good = total > 0
         safe = np.where(good, total, 1.0)
-        cx = (weight * self.X).sum(axis=(1, 2)) / safe
-        cy = (weight * self.Y).sum(axis=(1, 2)) / safe
+        cx = columns @ self.X[0, 0] / safe
+        cy = rows @ self.Y[0, :, 0] / safe
         return np.where(good[:, None], np.column_stack([cx, cy]), c)
 
 

@@ -191,7 +191,10 @@ def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
     und = camera.undistort_pixels(img) if camera is not None else img
     radii = np.full(len(obj), config.ring_dot_radius)
     radii[-1] = config.centre_dot_radius
-    H, inliers = fit_homography(obj, und, radii, params.max_homography_error,
+    # Blob centroids are rough (decimated, and a colour channel shifted by a
+    # lens moves some inks' blobs): a first guess, checked again by the
+    # measured centres.
+    H, inliers = fit_homography(obj, und, radii, 1.6 * params.max_homography_error,
                                 min_tolerance=0.75 * blobs.scale)
     if H is None:
         return None
@@ -208,7 +211,7 @@ def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
 def _normalisers(evecs: np.ndarray, semi: np.ndarray, offsets: np.ndarray,
                  ring_rho: np.ndarray):
     """
-    Maps taking the card's rings to circles of radii ``ring_rho``, best guess first.
+    Yield maps taking the card's rings to circles of radii ``ring_rho``, best guess first.
 
     First the centre blob's own ellipse to the unit circle. A small centre
     blob (a far card) is a poor guide to its own shape; the ring dots

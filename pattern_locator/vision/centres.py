@@ -6,7 +6,11 @@ image ellipse, grown for blur, ending at the card's edge, and shared with
 its neighbours by distance (a pixel counts for the nearest spot only). The
 centre is the darkness-weighted centroid of the window (darkness below the
 local white, less a floor that keeps paper noise out), recomputed with the
-window and the sharing re-centred on the latest estimates. Once the blur is
+window and the sharing re-centred on the latest estimates. With the colour
+channels shifted (a cheap lens, composite video) a dot's darkest channel
+lies between the images of the channels its ink is dark in, elsewhere for
+each ink: the card's channel shifts are measured and each centre is put
+where its green image is. Once the blur is
 known (from the spread of all the dots), a last centroid is taken in a
 window just big enough for the dot and its blur, with any dark region not
 connected to the dot left out: the centre of the dot's image ellipse, which
@@ -70,7 +74,7 @@ class Paper:
 def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                paper_xy: np.ndarray) -> Optional[Paper]:
     """
-    The card's white (median over plane points between the dots) and its noise.
+    Measure the card's white (median over plane points between the dots) and its noise.
 
     The noise is measured there too, from each point's 3x3 neighbourhood:
     next to a small card in a busy scene the image's local noise says more
@@ -229,7 +233,7 @@ class _Windows:
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
-                  core_margin: Optional[float] = None) -> SpotMeasures:
+                  core_margin: Optional[float] = None, refine: bool = True) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -237,7 +241,9 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     card's white and noise (:func:`card_paper`); ``colour``: measure the
     colours too (not for grey images). The peak darkness is measured within
     the spot's image ellipse grown by ``core_margin`` pixels round where it
-    should be (default: the largest channel shift, plus one).
+    should be (default: the largest channel shift, plus one). ``refine=False``
+    stops after the first, generous windows: enough to tell whether a spot
+    is there (the handedness marks), not for a centre to fit to.
     """
     params = dot_image.params
     if core_margin is None:
@@ -278,8 +284,10 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
               for index, scale in ((np.flatnonzero(~big), 1),
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
-        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper.sigma, params,
+        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
                     core_margin, out)
+    if not refine:
+        return out
     blur = _blur(groups, U, major, minor, out.valid)
     for g in groups:
         _last_pass(g, layout, spots, blur, major, minor, pred, out)
@@ -290,15 +298,15 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
-                noise: float, params: DetectorParams, core_margin: float,
+                paper: Paper, params: DetectorParams, core_margin: float,
                 out: SpotMeasures) -> None:
     """Centroid in a generous window, and the tests of a dot, written into ``out``."""
     idx, s = g.index, g.scale
     pixels = g.pixels
-    dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
+    dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
-    sigma = np.full(len(idx), noise / s, dtype=np.float32)
+    sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
     floor = np.maximum(0.04 * level, 2.0 * sigma)
     weight = np.maximum((level - floor)[:, None, None] - dark, 0.0)
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
@@ -524,10 +532,20 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
     table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
+    n = len(out.valid)
+    channel_at = np.full((n, 3, 2), np.nan)
+    strength = np.zeros((n, 3))
     for g in groups:
         idx = g.index
         k, size = g.pixels.shape[:2]
         d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
+        # Where each channel's image of the dot is.
+        w = np.maximum(d - 0.1, 0.0) * (g.cell & g.window & g.connected)[..., None]
+        total = np.maximum(w.sum(axis=(1, 2)), 1e-6)                            # (K, 3)
+        cx = np.einsum('kijc,j->kc', w, g.X[0, 0]) / total
+        cy = np.einsum('kijc,i->kc', w, g.Y[0, :, 0]) / total
+        channel_at[idx] = (np.stack([cx, cy], axis=-1) + g.base[:, None, :]) * g.scale + g.off
+        strength[idx] = total
         smooth = cv2.blur(np.ascontiguousarray(d.reshape(k * size, size, 3)), (3, 3),
                           borderType=cv2.BORDER_REPLICATE).reshape(d.shape)
         # The dot's inner part grown by the shift, clear of anything beside
@@ -550,6 +568,32 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             typical = np.median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
+    _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
+
+
+def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: float,
+                        out: SpotMeasures) -> None:
+    """
+    Put every dot's centre where its green image is.
+
+    With red and blue shifted against green (a cheap lens, composite video),
+    the darkest channel's image of a dot lies between the images of the
+    channels the ink is dark in: somewhere else for each ink, which the
+    homography would take for error. The card's shifts (red and blue
+    against green, the median over the dots dark in both) tell each dot's
+    offset, which is taken away.
+    """
+    dark = strength >= 0.6 * strength.max(axis=1, keepdims=True)        # (N, 3)
+    shift = np.zeros((3, 2))
+    for c in (0, 2):
+        both = out.valid & dark[:, c] & dark[:, 1]
+        if np.count_nonzero(both) >= 3:
+            shift[c] = np.clip(np.median(channel_at[both, c] - channel_at[both, 1], axis=0),
+                               -limit, limit)
+    if not np.any(shift):
+        return
+    bias = (dark[:, :, None] * shift[None]).sum(axis=1) / np.maximum(dark.sum(axis=1), 1)[:, None]
+    out.points[:] = out.points - bias
 
 
 def _box3(a: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ from ..errors import CodeError
 
 LETTERS = 'KRGB'
 # Crosstalk values tried when fitting the camera's colour response.
-_CROSSTALK = np.linspace(0.0, 0.45, 10)
+_CROSSTALK = np.linspace(0.0, 0.45, 7)
 
 
 @dataclass(frozen=True)
@@ -187,8 +187,8 @@ def _fit_response(darkness: np.ndarray, inks: np.ndarray,
     # The overlap happens before white balance: a channel takes in its
     # neighbours' light in proportion to how much of it there is. The
     # paper's colour as seen has been through the overlap too: undo it.
-    lights = np.clip(np.linalg.solve(mix, np.broadcast_to(light, (len(mix), 3))[..., None])[..., 0],
-                     0.05 * light.max(), None)                     # (T, 3)
+    seen_light = np.broadcast_to(light, (len(mix), 3))[..., None]
+    lights = np.clip(np.linalg.solve(mix, seen_light)[..., 0], 0.05 * light.max(), None)  # (T, 3)
     mix = mix * lights[:, None, :]
     mix /= mix.sum(axis=2, keepdims=True)
     mixed = np.einsum('kc,tdc->tkd', inks, mix)                  # (T, 4, 3)
@@ -203,7 +203,7 @@ def _fit_response(darkness: np.ndarray, inks: np.ndarray,
         # The white's error needs three inks on the ring to be told from the
         # inks' own colours (a ring of one colour and black cannot).
         free = np.array([len(set(row)) >= 3 for row in nearest.tolist()])[:, None, None]
-        for _ in range(3):
+        for _ in range(2):
             # a per dot, given w: 1 - light / w = a p.
             a = np.clip(np.sum(p * seen, axis=2) / np.sum(p * p, axis=2), 0.05, 1.2)
             # w per channel, given a: light = w (1 - a p).

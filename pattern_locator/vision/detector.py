@@ -124,10 +124,11 @@ class Detector:
         """
         Ways of grouping round candidate ``ci``, cheapest first.
 
-        On the decimated blobs when the centre is big enough there; then, for
-        a small or middling centre, on blobs segmented again at full
-        resolution round it (a far or steeply tilted card's dots are a few
-        pixels across and merge when decimated).
+        On the decimated blobs when the centre is big enough there; for a
+        small centre, or a middling one whose grouping did not hold, on
+        blobs segmented again at full resolution round it (a far or steeply
+        tilted card's dots are a few pixels across and merge when
+        decimated).
         """
         blobs = dot_image.blobs
         radius = np.sqrt(blobs.area[ci] / np.pi)
@@ -135,7 +136,15 @@ class Detector:
             guess = group(blobs, ci, self.config, self.params, camera)
             if guess is not None:
                 yield guess
-            if blobs.scale == 1 or radius >= 12.0:
+            # A middling round centre with nothing card-like round it: no card
+            # there. A steep view (an elongated centre), a crowd of dot-sized
+            # blobs that would not group (shifted colour channels distort
+            # decimated blobs) and a grouping whose dots then fail: again at
+            # full resolution.
+            w, h = blobs.box[ci, 2], blobs.box[ci, 3]
+            steep = max(w, h) >= 1.8 * min(w, h)
+            if blobs.scale == 1 or radius >= 12.0 or (
+                    guess is None and not steep and not self._crowded(blobs, ci)):
                 return
         reach = int(1.9 * self._rho_out * max(blobs.extent(ci), radius) + 8)
         u, v = int(round(blobs.u[ci])), int(round(blobs.v[ci]))
@@ -149,6 +158,14 @@ class Detector:
         guess = group(fine, j, self.config, self.params, camera)
         if guess is not None:
             yield guess
+
+    def _crowded(self, blobs, ci: int) -> bool:
+        """Tell whether ring-dot-sized blobs crowd round blob ``ci`` as a card's would."""
+        reach = 1.6 * self._rho_out * blobs.extent(ci) + 2
+        ratio = blobs.area / blobs.area[ci]
+        near = (np.abs(blobs.u - blobs.u[ci]) < reach) & (np.abs(blobs.v - blobs.v[ci]) < reach) \
+            & (ratio > 0.12) & (ratio < 0.9)
+        return int(np.count_nonzero(near)) >= 10
 
     def _covered(self, card: CardDetection, blobs, camera: Optional[CameraModel]
                  ) -> np.ndarray:
@@ -244,7 +261,7 @@ class Detector:
         """Tell whether the handedness marks show the card itself (not its mirror image)."""
         cfg = self.config
         marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, paper,
-                              colour=False, core_margin=1.0)
+                              colour=False, core_margin=1.0, refine=False)
         rows = 1 + reading.point1_slot + RING_POINTS * np.arange(cfg.n_rings)
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:

@@ -248,10 +248,10 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     two away (or as close, in noise); when the camera moved between the
     fields, the rows of one field disagree with the other field's in every
     moving area: the curvature over one row exceeds that over two, by far.
-    Measured on every eighth column, in tiles, so that one small card
+    Measured on every sixteenth column, in tiles, so that one small card
     moving against a still background is enough.
     """
-    g = image[:, ::8, 1] if image.ndim == 3 else image[:, ::8]
+    g = image[:, ::16, 1] if image.ndim == 3 else image[:, ::16]
     g = g.astype(np.int16)
     h = (g.shape[0] - 4) // 2 * 2
     if h < 2 * tile_rows:
@@ -260,12 +260,12 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     one = np.abs(2 * mid - g[1:1 + h] - g[3:3 + h])
     two = np.abs(2 * mid - g[0:h] - g[4:4 + h])
     rows = h // tile_rows * tile_rows
-    cols = one.shape[1] // 8 * 8
+    cols = one.shape[1] // 4 * 4
     if cols == 0:
         return False
-    t1 = one[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 8, 8).sum(axis=(1, 3))
-    t2 = two[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 8, 8).sum(axis=(1, 3))
-    pixels = tile_rows * 8
+    t1 = one[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
+    t2 = two[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
+    pixels = tile_rows * 4
     # A tile counts when its one-row curvature is strong (6 levels a pixel on
     # average) and three times its two-row curvature.
     strong = (t1 > 6 * pixels) & (t1 > 3 * t2)

@@ -1,4 +1,4 @@
-"""Cards stage: candidates ranked by evidence under a budget, slots assigned, homography verified."""
+"""Cards stage: candidates ranked by evidence under a budget, slots, homography verified."""
 
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig

@@ -118,8 +118,7 @@ def test_cards_without_marks_still_read_and_their_mirror_reads_as_the_mirrored_c
     mirror = render([(T, MirroredTexture(DotCardTexture(PAPER_CFG, code)))], config=PAPER_CFG,
                     noise_sigma=1.5)
     assert [c.code for c in detector.detect(mirror, VGA)] == [code.mirrored()]
-    # A marked card is never read by a configuration without marks as valid...
-    # ...and an unmarked card is never read by one with them.
+    # A detector set up for marked cards does not read an unmarked one.
     assert DETECTOR.detect(direct, VGA) == []
 
 

@@ -1,4 +1,4 @@
-"""Dots stage: segmentation against the local white and noise, interlace, full-resolution windows."""
+"""Dots stage: segmentation against the local white and noise, interlace, full resolution."""
 
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig

@@ -204,7 +204,12 @@ def test_play_any_topics_from_a_sqlite3_bag(tmp_path, client):
 
 @pytest.fixture
 def locator(tmp_path):
-    with locator_process(tmp_path / 'locator.txt', ['use_joint_states:=true']) as proc:
+    # The checked-in bag shows the paper's cards, printed without handedness
+    # marks: the locator is told so (the shipped pattern has marks).
+    pattern = tmp_path / 'pattern.yaml'
+    pattern.write_text('handedness_mark: null\n')
+    with locator_process(tmp_path / 'locator.txt', ['use_joint_states:=true',
+                                                    f'pattern_config:={pattern}']) as proc:
         yield proc
 
 

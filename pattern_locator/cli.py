@@ -120,10 +120,18 @@ def _parser() -> argparse.ArgumentParser:
     bench = sub.add_parser('bench', help='accuracy and speed against AprilTag and ArUco',
                            description='Render seeded scenes and compare with AprilTag '
                                        'and ArUco, printing tables.')
-    bench.add_argument('--scenes', type=int, default=40,
-                       help='scenes per distance bin and camera (default 40)')
+    bench.add_argument('--scenes', type=int, default=None,
+                       help='scenes per distance bin and camera (default 40); with --stress, '
+                            'frames per condition and camera (default 10)')
     bench.add_argument('--seed', type=int, default=1, help='seed of the scenes (default 1)')
-    bench.add_argument('--quick', action='store_true', help='a small run for smoke tests')
+    bench.add_argument('--quick', action='store_true',
+                       help='a smoke test: one scene each; its figures are noise')
+    bench.add_argument('--stress', action='store_true',
+                       help='one row per hard condition (textures, dark noise, clutter, '
+                            'coloured light, chromatic shift, mirrors, dim, blur, occlusion, '
+                            'interlace, far) next to AprilTag on the same frames')
+    bench.add_argument('--output-dir', default='out',
+                       help='where the plots go (default out/)')
     bench.add_argument('--tracking', action='store_true',
                        help='the tracking loop in closed loop (sim + camera_driver + locator)')
     bench.add_argument('--node', action='store_true',
@@ -384,6 +392,14 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
+    kinds = [name for name in ('stress', 'node', 'tracking', 'fuzz', 'survey')
+             if getattr(args, name)]
+    if args.drive_core is not None:
+        kinds.append('drive_core')
+    if len(kinds) > 1:
+        raise ConfigError('bench: choose one of --stress, --node, --tracking, --fuzz, --survey, '
+                          '--drive-core (got '
+                          f'{" and ".join("--" + k.replace("_", "-") for k in kinds)})')
     if args.drive_core is not None:
         from .evaluation.drive_core import main as drive_core_main
         return drive_core_main(args.drive_core)
@@ -399,11 +415,16 @@ def _bench(args: argparse.Namespace) -> int:
     if args.node:
         from .evaluation.bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
-    if args.survey:
-        from .evaluation.bench_survey import run_survey_bench
-        return run_survey_bench(quick=args.quick, seed=args.seed)
+    if args.drive_core is not None:
+        from .evaluation.drive_core import main as drive_core_main
+        return drive_core_main(args.drive_core)
+    kinds = [name for name in ('stress', 'node', 'tracking') if getattr(args, name)]
+    if len(kinds) > 1:
+        raise ConfigError(f'bench: choose one of --stress, --node, --tracking (got '
+                          f'{" and ".join("--" + k for k in kinds)})')
     from .evaluation.bench import run_bench
-    return run_bench(scenes_per_bin=args.scenes, seed=args.seed, quick=args.quick)
+    return run_bench(scenes_per_bin=args.scenes or 40, seed=args.seed, quick=args.quick,
+                     output_dir=args.output_dir)
 
 
 def _bag_record(args: argparse.Namespace) -> int:

@@ -10,6 +10,12 @@ dot; ring ``i`` (0 = outer, 1 = inner, ...) point ``k`` is ``1 + 8 * i + (k - 1)
 
 Code text form: the centre letter, ``-``, then points 1..8, letters
 ``K R G B``, e.g. ``R-KRGBBGRG``.
+
+Handedness marks: the ring is symmetric about the card's y axis, so a card
+seen in a mirror (a glass door, the back of thin paper against the light)
+shows the same dots in the other order, which is another valid code. Small
+black dots printed at positions whose mirror images are blank paper tell the
+two apart (:class:`HandednessMark`); the paper's cards have none.
 """
 
 from dataclasses import dataclass
@@ -61,6 +67,10 @@ class Code:
         """Colour letter of ``'centre'`` or ring point 1..8."""
         return self.centre if dot == CENTRE else self.ring[int(dot) - 1]
 
+    def mirrored(self) -> 'Code':
+        """Return the code a mirror image of this card reads as (points 2..8 reversed)."""
+        return Code(self.centre, self.ring[0] + self.ring[:0:-1])
+
 
 @dataclass(frozen=True)
 class Ids:
@@ -91,6 +101,25 @@ class CodeField:
 
 
 @dataclass(frozen=True)
+class HandednessMark:
+    """
+    Black marks that a mirror moves, at ``angles_deg`` from point 1.
+
+    Angles are measured like the ring points (clockwise from point 1 as
+    seen from the front). Each mark's mirror image (x -> -x) falls on blank
+    paper, so a mirror image of the card shows paper where the marks belong
+    and marks where paper belongs. Two marks on opposite sides keep one in
+    view when an object hides part of the card. ``radius`` and ``distance``
+    (from the centre, metres) default to values that scale with the card:
+    see :meth:`PatternConfig.mark_radius` and :meth:`PatternConfig.mark_distance`.
+    """
+
+    angles_deg: Tuple[float, ...] = (22.5, 202.5)
+    radius: Optional[float] = None
+    distance: Optional[float] = None
+
+
+@dataclass(frozen=True)
 class PatternConfig:
     """Card geometry (metres) and code layout; load with :func:`load_pattern_config`."""
 
@@ -107,6 +136,7 @@ class PatternConfig:
         CodeField('room', (2, 3, 4, 5), 1),
         CodeField('pattern', (6, 7), 1),
     )
+    handedness_mark: Optional[HandednessMark] = HandednessMark()
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -153,6 +183,42 @@ class PatternConfig:
 
     def colour_rgb(self, letter: str) -> Tuple[int, int, int]:
         return dict(self.colours_rgb)[letter]
+
+    # Handedness marks --------------------------------------------------------
+
+    @property
+    def mark_radius(self) -> float:
+        """Radius (m) of the handedness marks: given, or 0.85 ring-dot radii."""
+        mark = self.handedness_mark
+        if mark is not None and mark.radius is not None:
+            return float(mark.radius)
+        return 0.85 * self.ring_dot_radius
+
+    @property
+    def mark_distance(self) -> float:
+        """
+        Distance (m) of the marks from the centre.
+
+        Given, or halfway between the two outer rings as far as the nearest
+        dots go: between slots (22.5 degrees off a point) the distance to
+        a dot of either ring is the same at ``(R0 + R1) / (2 cos 22.5)``.
+        With one ring, 0.6 of its radius (inside it).
+        """
+        mark = self.handedness_mark
+        if mark is not None and mark.distance is not None:
+            return float(mark.distance)
+        if len(self.ring_radii) >= 2:
+            return (self.ring_radii[0] + self.ring_radii[1]) / (2 * np.cos(np.pi / 8))
+        return 0.6 * self.ring_radii[0]
+
+    def mark_points(self, mirrored: bool = False) -> np.ndarray:
+        """(m, 2) mark centres in the pattern plane; ``mirrored``: where a mirror shows them."""
+        if self.handedness_mark is None:
+            return np.zeros((0, 2))
+        a = np.deg2rad(np.asarray(self.handedness_mark.angles_deg, dtype=float))
+        d = self.mark_distance
+        x = d * np.sin(a)
+        return np.column_stack([-x if mirrored else x, d * np.cos(a)])
 
     # Code -----------------------------------------------------------------
 
@@ -240,6 +306,8 @@ def _validate(cfg: PatternConfig) -> None:
             if np.linalg.norm(pts[i] - pts[j]) <= radii[i] + radii[j]:
                 raise ConfigError(f'pattern: dots {i} and {j} overlap; reduce the dot radii '
                                   f'or separate the rings')
+    if cfg.handedness_mark is not None:
+        _validate_mark(cfg, pts[:, :2], radii)
     colours = dict(cfg.colours_rgb)
     if sorted(colours) != sorted(COLOURS):
         raise ConfigError(f'pattern: colours must define K, R, G, B, got {sorted(colours)}')
@@ -262,6 +330,30 @@ def _validate(cfg: PatternConfig) -> None:
         twice = sorted({str(d) for d in used if used.count(d) > 1})
         raise ConfigError(f'pattern: code.fields must use the centre and points 2..8 exactly '
                           f'once (missing {missing}, repeated {twice})')
+
+
+def _validate_mark(cfg: PatternConfig, dots: np.ndarray, radii: np.ndarray) -> None:
+    mark = cfg.handedness_mark
+    r = PatternConfig.mark_radius.fget(cfg)
+    if not (r > 0 and PatternConfig.mark_distance.fget(cfg) > 0 and len(mark.angles_deg) >= 1):
+        raise ConfigError('pattern: handedness_mark needs a positive radius and distance and '
+                          'at least one angle')
+    marks = PatternConfig.mark_points(cfg)
+    mirrored = PatternConfig.mark_points(cfg, mirrored=True)
+    if np.max(np.abs(marks)) + r > cfg.card_size / 2:
+        raise ConfigError('pattern: handedness_mark does not fit on the card')
+    # A mark needs blank paper round it (one mark radius) to be seen apart
+    # from the dots; so does its mirror image, where paper must be seen.
+    for points, what in ((marks, 'a mark'), (mirrored, "a mark's mirror image")):
+        gap = np.linalg.norm(points[:, None] - dots[None], axis=2) - radii[None] - r
+        if np.min(gap) < r:
+            raise ConfigError(f'pattern: {what} comes within {r * 1000:.0f} mm of a dot; '
+                              f'move handedness_mark or make it smaller')
+    # Chiral: every mirror image falls on paper, away from every mark.
+    apart = np.linalg.norm(mirrored[:, None] - marks[None], axis=2)
+    if np.min(apart) < 3 * r:
+        raise ConfigError('pattern: handedness_mark angles are mirror-symmetric (a mirror image '
+                          'would show a mark where one belongs); use e.g. 22.5 and 202.5')
 
 
 def _parse_hex(letter: str, text: str) -> Tuple[int, int, int]:
@@ -310,10 +402,28 @@ def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConf
             dots = tuple(d if d == CENTRE else int(d) for d in spec['dots'])
             fields.append(CodeField(str(name), dots, int(spec.get('first', 0))))
         kwargs['fields'] = tuple(fields)
+    if 'handedness_mark' in data:
+        kwargs['handedness_mark'] = _mark_from_dict(data['handedness_mark'], source)
     try:
         return PatternConfig(**kwargs)
     except ConfigError as exc:
         raise ConfigError(f'{source}: {str(exc).removeprefix("pattern: ")}') from None
+
+
+def _mark_from_dict(spec, source: str) -> Optional[HandednessMark]:
+    if spec is None or spec is False:
+        return None
+    if not isinstance(spec, dict):
+        raise ConfigError(f'{source}: handedness_mark must be a mapping (angles_deg, and '
+                          f'optionally radius, distance) or null for cards printed without it')
+    default = HandednessMark()
+    try:
+        return HandednessMark(
+            tuple(float(a) for a in spec.get('angles_deg', default.angles_deg)),
+            None if spec.get('radius') is None else float(spec['radius']),
+            None if spec.get('distance') is None else float(spec['distance']))
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f'{source}: handedness_mark values must be numbers ({exc})')
 
 
 def load_pattern_config(path: Optional[Union[str, Path]] = None) -> PatternConfig:

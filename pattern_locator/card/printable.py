@@ -358,6 +358,10 @@ def _posters(config: PatternConfig, ids: Ids) -> List[_Poster]:
         name = 'dot-centre' if ring is None else f'dot-r{ring}-p{number}'
         dots.append(Circle(float(point[0]), float(-point[1]), float(radius),
                            fill=config.colour_rgb(letter), name=name, role='dot'))
+    # Handedness marks: black like point 1, where a mirror image shows paper.
+    for k, (x, y) in enumerate(config.mark_points() * 1000.0):
+        dots.append(Circle(float(x), float(-y), config.mark_radius * 1000.0,
+                           fill=config.colour_rgb('K'), name=f'mark-{k + 1}', role='mark'))
     dot_box = _union(*(_item_box(d) for d in dots))
     half = config.card_size * 500.0
     card = (-half, -half, half, half)

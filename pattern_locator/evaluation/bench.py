@@ -13,9 +13,15 @@ a few degrees of error. The flip counts without it are printed too.
 
 Tables: per camera and distance bin, detection rate, wrong ids, median and
 mean position error (mm and % of distance), median rotation error, median
-time per frame and its ratio to AprilTag's in the same run; the Cramer-Rao
-bound of the position for the measured dot-centre noise; partial occlusion;
-and the paper's Table 1 setup with both of our estimators.
+time per frame and its ratio to AprilTag's in the same run; time per frame
+per camera (median, mean, p99, max) with the ratios; the Cramer-Rao bound of
+the position for the measured dot-centre noise; partial occlusion; and the
+paper's Table 1 setup with both of our estimators. Plots (matplotlib, under
+``out/`` by default): position error against distance per marker on log
+scales, and the distribution of time per frame; each run kind has its own
+file names (``bench_*``, ``bench_quick_*``, ``bench_stress_*``), so one never
+overwrites another's. ``--quick`` is a smoke test of the machinery, and says
+so.
 """
 
 from dataclasses import dataclass, field, replace
@@ -266,13 +272,17 @@ def _is_flip(chosen: Pose, other: Optional[Pose], T: Pose, distance: float) -> b
     return err > FLIP_FRACTION * distance and err_other < 0.5 * err
 
 
-def run_scenes(scenes: Sequence[Scene], config: PatternConfig, progress: bool = True
-               ) -> Dict[str, List[Tuple[Scene, Outcome]]]:
+def run_scenes(scenes: Sequence[Scene], config: PatternConfig, progress: bool = True,
+               label: str = 'scenes') -> Dict[str, List[Tuple[Scene, Outcome]]]:
+    """Render every scene for every marker and run its locator; a progress bar on a terminal."""
+    from tqdm import tqdm
+
     cameras = bench_cameras()
     ours = CardLocator(config)
     tags = {m: make_locator(m, config.card_size) for m in MARKERS[1:]}
     results: Dict[str, List[Tuple[Scene, Outcome]]] = {m: [] for m in MARKERS}
-    for i, scene in enumerate(scenes):
+    for scene in tqdm(scenes, desc=label, unit='scene', leave=False,
+                      disable=None if progress else True):
         camera = cameras[scene.camera_name]
         for marker in MARKERS:
             rendered, T = _render(scene, camera, config, marker)
@@ -283,8 +293,6 @@ def run_scenes(scenes: Sequence[Scene], config: PatternConfig, progress: bool = 
                 outcome = run_tag(tags[marker], camera, scene, rendered.image, T, marker,
                                   config.card_size)
             results[marker].append((scene, outcome))
-        if progress and (i + 1) % 20 == 0:
-            print(f'  ... {i + 1}/{len(scenes)} scenes', flush=True)
     return results
 
 
@@ -337,15 +345,47 @@ def accuracy_table(results: Dict[str, List[Tuple[Scene, Outcome]]], camera_name:
     return '\n'.join(lines)
 
 
+def time_stats(values: Sequence[float]) -> Tuple[float, float, float, float]:
+    """Median, mean, 99th percentile and max of the finite values (NaN when none)."""
+    v = np.asarray([x for x in values if not math.isnan(x)], dtype=float)
+    if v.size == 0:
+        return (math.nan,) * 4
+    return (float(np.median(v)), float(np.mean(v)), float(np.percentile(v, 99)),
+            float(np.max(v)))
+
+
 def time_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
-    lines = ['\n### Median time per frame over all scenes (single thread, pose included)',
-             f'{"camera":<24}' + ''.join(f'{m + " ms":>13}' for m in MARKERS)
-             + f'{"dots/April":>12}']
+    """Time per frame per camera and marker (median, mean, p99, max) and our ratios to AprilTag."""
+    lines = ['\n### Time per frame over all scenes (ms, single thread, pose included)',
+             f'{"camera":<24}{"marker":<10}{"median":>8}{"mean":>8}{"p99":>8}{"max":>8}'
+             f'{"x April med":>12}{"mean":>6}{"p99":>6}{"max":>6}']
+    for camera_name in list(bench_cameras()) + ['both cameras']:
+        stats = {m: time_stats([o.time_ms for s, o in results[m]
+                                if camera_name == 'both cameras' or s.camera_name == camera_name])
+                 for m in MARKERS}
+        for m in MARKERS:
+            ratio = ''
+            if m == 'dots':
+                ratio = ''.join(_fmt(a / b if b > 0 else math.nan, 2, 12 if i == 0 else 6)
+                                for i, (a, b) in enumerate(zip(stats['dots'], stats['apriltag'])))
+            lines.append(f'{camera_name:<24}{m:<10}' + ''.join(_fmt(v, 2) for v in stats[m])
+                         + ratio)
+    return '\n'.join(lines)
+
+
+def quick_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
+    """One line per camera and marker, all distances together: the smoke test's summary."""
+    lines = [f'{"camera":<24}{"marker":<10}{"det %":>7}{"wrong":>6}{"med mm":>8}'
+             f'{"ms med":>8}{"mean":>7}{"max":>7}']
     for camera_name in bench_cameras():
-        ms = {m: _median([o.time_ms for s, o in results[m] if s.camera_name == camera_name])
-              for m in MARKERS}
-        lines.append(f'{camera_name:<24}' + ''.join(_fmt(ms[m], 2, 13) for m in MARKERS)
-                     + _fmt(ms['dots'] / ms['apriltag'], 2, 12))
+        for m in MARKERS:
+            outs = [o for s, o in results[m] if s.camera_name == camera_name]
+            found = [o for o in outs if o.found]
+            med, mean, _, top = time_stats([o.time_ms for o in outs])
+            lines.append(f'{camera_name:<24}{m:<10}{100 * len(found) / max(len(outs), 1):>7.0f}'
+                         f'{sum(o.wrong_ids for o in outs):>6}'
+                         f'{_fmt(_median([o.position_error * 1000 for o in found]))}'
+                         f'{_fmt(med, 2)}{_fmt(mean, 2, 7)}{_fmt(top, 2, 7)}')
     return '\n'.join(lines)
 
 
@@ -442,23 +482,30 @@ def paper_table(config: PatternConfig, n: int, seed: int) -> str:
     return '\n'.join(lines)
 
 
-def run_bench(scenes_per_bin: int = 40, seed: int = 1, quick: bool = False) -> int:
-    """Run every table and print it; returns the exit status."""
+def run_bench(scenes_per_bin: int = 40, seed: int = 1, quick: bool = False,
+              output_dir: Optional[str] = 'out') -> int:
+    """Run every table and print it, and plot; returns the exit status."""
     cv2.setNumThreads(1)      # single-threaded, like AprilTag with nthreads=1
     config = load_pattern_config()
-    per_bin = 2 if quick else scenes_per_bin
-    occluded_per_bin = 1 if quick else max(4, scenes_per_bin // 4)
-    paper_n = 6 if quick else max(30, scenes_per_bin)
-    print(f'pattern_locator bench: {per_bin} scenes per distance bin and camera, seed {seed}, '
-          f'single-threaded')
-    scenes = make_scenes(config, per_bin, seed)
+    if quick:
+        print('pattern_locator bench --quick: a SMOKE TEST (1 scene per distance bin and camera); '
+              'its figures are noise, not a measurement: run `pattern-locator bench` for those.')
+        results = run_scenes(make_scenes(config, 1, seed), config)
+        print(quick_table(results))
+        _plots(results, output_dir, 'bench_quick')
+        return 0
+    occluded_per_bin = max(4, scenes_per_bin // 4)
+    paper_n = max(30, scenes_per_bin)
+    print(f'pattern_locator bench: {scenes_per_bin} scenes per distance bin and camera, '
+          f'seed {seed}, single-threaded')
+    scenes = make_scenes(config, scenes_per_bin, seed)
     results = run_scenes(scenes, config)
     for camera_name in bench_cameras():
         print(accuracy_table(results, camera_name))
     print(time_table(results))
     print(flip_table(results))
     occluded = run_scenes(make_scenes(config, occluded_per_bin, seed, occluded=True), config,
-                          progress=False)
+                          label='occluded scenes')
     print(occlusion_table(occluded))
     print(paper_table(config, paper_n, seed))
     noise = [o.dot_noise_px for _, o in results['dots'] if o.found]
@@ -466,4 +513,20 @@ def run_bench(scenes_per_bin: int = 40, seed: int = 1, quick: bool = False) -> i
           f'{_median(noise):.3f} px; columns: det % = right id found, wrong = detections '
           f'with an id not in the scene, x April = time / AprilTag time, CRB mm = median '
           f'position error an efficient estimator would have for that noise, /CRB = ratio')
+    _plots(results, output_dir, 'bench')
     return 0
+
+
+def _plots(results: Dict[str, List[Tuple[Scene, Outcome]]], output_dir: Optional[str],
+           kind: str) -> None:
+    if not output_dir:
+        return
+    from .bench_plots import error_plot, time_plot
+
+    errors = {m: [(s.distance, o.position_error) for s, o in results[m] if o.found]
+              for m in MARKERS}
+    times = {f'{m}, {camera.split()[0]}': [o.time_ms for s, o in results[m]
+                                           if s.camera_name == camera]
+             for camera in bench_cameras() for m in MARKERS}
+    paths = [error_plot(errors, output_dir, kind), time_plot(times, output_dir, kind)]
+    print('plots: ' + ', '.join(str(p) for p in paths))

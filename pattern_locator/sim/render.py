@@ -38,7 +38,7 @@ from ..errors import CodeError, ConfigError, ImageError
 from ..vision.camera import CameraModel
 from ..vision.geometry import look_at, Pose, rodrigues
 
-BACKGROUNDS = ('wall', 'clutter', 'black', 'white')
+BACKGROUNDS = ('wall', 'clutter', 'black', 'white', 'texture', 'night', 'photo')
 # Surfaces closer than this to the camera plane (metres) are not rendered.
 NEAR_PLANE = 1e-3
 # Linear reflectance of a card seen from behind (plain paper back).
@@ -102,14 +102,22 @@ class DotCardTexture:
         self.config = config
         self.code = code
         self.size = float(config.card_size)
-        # Row k is dot k's ink, the last row is the paper.
+        centres = config.model_points()[:, :2]
+        radii = config.dot_radii()
+        if config.handedness_mark is not None:
+            # The handedness marks are printed in black ink like point 1.
+            marks = config.mark_points()
+            centres = np.vstack([centres, marks])
+            radii = np.append(radii, np.full(len(marks), config.mark_radius))
+            rgb = rgb + [config.colour_rgb('K')] * len(marks)
+        # Row k is circle k's ink (dots, then marks), the last row is the paper.
         self._colours = np.vstack([ink_reflectance(np.array(rgb, dtype=float), paper_white,
                                                    black_ink), np.full(3, paper_white)]
                                   ).astype(np.float32)
         # Candidate lists are padded with the paper's index, whose circle is empty.
-        self._centres = np.vstack([config.model_points()[:, :2], np.zeros(2)])
-        self._r2 = np.append(config.dot_radii() ** 2, -1.0)
-        self._build_grid(config.dot_radii())
+        self._centres = np.vstack([centres, np.zeros(2)])
+        self._r2 = np.append(radii ** 2, -1.0)
+        self._build_grid(radii)
 
     def _build_grid(self, radii: np.ndarray) -> None:
         paper = len(radii)
@@ -155,6 +163,35 @@ class DotCardTexture:
             inside = d2 <= self._r2[dots]
             labels[edge[inside]] = dots[inside]
         return np.take(self._colours, labels, axis=0)
+
+
+class MirroredTexture:
+    """
+    A card seen in a mirror: its face flipped left to right (x -> -x).
+
+    Rendering it where the mirror image of the card appears (behind the
+    mirror) gives what the camera sees. ``contrast`` below 1 fades the print
+    towards the paper, as a card seen from behind through thin paper with
+    light behind it.
+    """
+
+    def __init__(self, texture: CardTexture, contrast: float = 1.0,
+                 paper_white: float = 0.85) -> None:
+        if not (_finite(contrast) and 0.0 < contrast <= 1.0):
+            raise ConfigError(f'render: mirror contrast must be in (0, 1], got {contrast!r}')
+        self.texture = texture
+        self.size = float(texture.size)
+        self.contrast = float(contrast)
+        self.paper_white = float(paper_white)
+
+    def reflectance(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 3) linear RGB reflectance at (N, 2) card-frame points (metres)."""
+        xy = np.array(xy, dtype=np.float64).reshape(-1, 2)
+        xy[:, 0] = -xy[:, 0]
+        out = self.texture.reflectance(xy)
+        if self.contrast < 1.0:
+            out = self.paper_white - self.contrast * (self.paper_white - out)
+        return out
 
 
 class BitmapCardTexture:
@@ -234,9 +271,27 @@ class RenderOptions:
     (it lowers contrast). Noise: ``shot_noise`` is photon noise in linear
     units, standard deviation ``shot_noise * sqrt(signal)``; ``noise_sigma``
     is additive Gaussian read noise in 8-bit units after the gamma encoding.
+
+    Colour optics and video: ``lateral_ca`` magnifies the red image by
+    ``1 + lateral_ca`` and the blue one by ``1 - lateral_ca`` about the
+    principal point (a cheap lens's lateral chromatic aberration);
+    ``channel_shift_px`` displaces the red image by ``(dx, dy)`` pixels and the
+    blue one by the opposite (misregistered channels, composite video);
+    ``chroma_blur_px`` blurs the colour-difference signals along the rows
+    (composite video's narrow chroma band). ``interlace_shift_px``: the odd
+    rows (the second field of an interlaced frame) are exposed after the
+    camera panned by this many pixels to the right. ``crosstalk``: the
+    overlap of a real sensor's colour filters, which desaturates colours:
+    each channel receives ``1 - crosstalk`` of its own light and
+    ``crosstalk / 2`` of each other channel's (a cheap camera's colour
+    matrix leaves some of it; 0.3 makes the printed green far greyer).
+
     Backgrounds: ``wall`` (grey, slightly blotchy, random shade), ``clutter``
     (the wall under random shapes, dots, lines and text), ``black`` (0.01),
-    ``white`` (0.85, the same as the paper).
+    ``white`` (0.85, the same as the paper), ``texture`` (fine texture such
+    as carpet, gravel or foliage: noise blurred by 0.6-1.2 px), ``night``
+    (a dark scene, reflectance 0.002-0.02, a few small lamps), ``photo`` (a
+    cluttered room: textured patches, polka dots, shapes, text and shading).
     """
 
     supersample: int = 3
@@ -252,6 +307,11 @@ class RenderOptions:
     shot_noise: float = 0.0
     gamma: float = 2.2
     jpeg_quality: Optional[int] = None
+    lateral_ca: float = 0.0
+    channel_shift_px: Tuple[float, float] = (0.0, 0.0)
+    chroma_blur_px: float = 0.0
+    interlace_shift_px: float = 0.0
+    crosstalk: float = 0.0
     background: str = 'wall'
     occluders: Tuple[Occluder, ...] = ()
     seed: int = 0
@@ -544,13 +604,87 @@ def _background(kind: str, height: int, width: int, rng: np.random.Generator) ->
     shade = 1.0 + 0.03 * blotches + 0.01 * grain
     if kind == 'wall':
         return shade[:, :, None] * tint
+    if kind == 'texture':
+        return _fine_texture(height, width, rng)
+    if kind == 'night':
+        return _night(height, width, rng)
     # Clutter is drawn anti-aliased in 8 bits (cv2 anti-aliases 8-bit images
     # only) with a 2.2 gamma, then turned back into linear reflectance.
     to_gamma = np.float32(1 / 2.2)
     canvas = np.dstack([np.clip(255.0 * (shade * c) ** to_gamma, 0, 255).astype(np.uint8)
                         for c in tint])
-    _draw_clutter(canvas, rng)
-    return ((np.arange(256, dtype=np.float32) / 255.0) ** 2.2)[canvas]
+    if kind == 'photo':
+        _draw_photo(canvas, rng)
+    else:
+        _draw_clutter(canvas, rng)
+    linear = ((np.arange(256, dtype=np.float32) / 255.0) ** 2.2)[canvas]
+    if kind == 'photo':
+        # Uneven light over the room: smooth shading from 0.4 to 1.2.
+        coarse = rng.uniform(0.4, 1.2, (4, 5)).astype(np.float32)
+        linear *= cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)[:, :, None]
+    return linear
+
+
+def _texture_patch(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
+    """(H, W, 3) linear reflectance of a fine texture: noise blurred by 0.6-1.2 px."""
+    sigma = float(rng.uniform(0.6, 1.2))
+    grey = rng.random() < 0.5
+    noise = rng.standard_normal((height, width, 1 if grey else 3), dtype=np.float32)
+    noise = cv2.GaussianBlur(noise, (0, 0), sigma).reshape(height, width, -1)
+    noise /= max(float(noise.std()), 1e-6)
+    mean = float(rng.uniform(0.08, 0.7))
+    tint = (1.0 + rng.uniform(-0.25, 0.25, 3)).astype(np.float32)
+    amplitude = float(rng.uniform(0.25, 0.7))
+    return np.clip(mean * tint * (1.0 + amplitude * noise), 0.0, 1.0)
+
+
+def _fine_texture(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
+    """Carpet, gravel or foliage over the whole view, under a gentle shading."""
+    texture = _texture_patch(height, width, rng)
+    coarse = rng.uniform(0.7, 1.1, (3, 4)).astype(np.float32)
+    return texture * cv2.resize(coarse, (width, height),
+                                interpolation=cv2.INTER_CUBIC)[:, :, None]
+
+
+def _night(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
+    """Make a dark scene: reflectance 0.002-0.02, smooth, with a few small lamps."""
+    level = float(rng.uniform(0.002, 0.02))
+    coarse = rng.uniform(0.5, 1.5, (3, 4)).astype(np.float32)
+    dark = level * cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
+    out = np.repeat(dark[:, :, None], 3, axis=2)
+    for _ in range(int(rng.integers(0, 12))):
+        x, y = int(rng.integers(width)), int(rng.integers(height))
+        radius = int(rng.integers(1, 4))
+        cv2.circle(out, (x, y), radius, tuple(float(v) for v in rng.uniform(0.5, 1.0, 3)), -1)
+    return out
+
+
+def _draw_photo(canvas: np.ndarray, rng: np.random.Generator) -> None:
+    """Draw a cluttered room: textured patches, polka-dot fabric, then dense clutter."""
+    height, width = canvas.shape[:2]
+    scale = math.sqrt(height * width / (640 * 480))
+    to_gamma = 1.0 / 2.2
+    for _ in range(int(rng.integers(3, 9))):
+        w = int(rng.uniform(0.1, 0.5) * width)
+        h = int(rng.uniform(0.1, 0.5) * height)
+        x, y = int(rng.integers(0, width - w)), int(rng.integers(0, height - h))
+        patch = _texture_patch(h, w, rng)
+        canvas[y:y + h, x:x + w] = np.clip(255.0 * patch ** to_gamma, 0, 255).astype(np.uint8)
+    for _ in range(int(rng.integers(1, 4))):
+        # Polka dots: a grid of round dots, each with 8 neighbours around it.
+        w = int(rng.uniform(0.15, 0.4) * width)
+        h = int(rng.uniform(0.15, 0.4) * height)
+        x0, y0 = int(rng.integers(0, width - w)), int(rng.integers(0, height - h))
+        radius = rng.uniform(2.0, 9.0) * scale
+        pitch = radius * rng.uniform(2.5, 4.5)
+        colour = _random_colour(rng)
+        for gy in np.arange(y0, y0 + h, pitch):
+            for gx in np.arange(x0, x0 + w, pitch):
+                r = radius * rng.uniform(0.8, 1.25)
+                cv2.circle(canvas, (int(gx), int(gy)), max(1, int(round(r))), colour, -1,
+                           cv2.LINE_AA)
+    for _ in range(3):
+        _draw_clutter(canvas, rng)
 
 
 def _random_colour(rng: np.random.Generator) -> Tuple[int, int, int]:
@@ -636,8 +770,57 @@ def _motion_kernel(length: float, angle_deg: float) -> np.ndarray:
     return kernel / kernel.sum()
 
 
-def _finish(linear: np.ndarray, options: RenderOptions, rng: np.random.Generator
-            ) -> np.ndarray:
+def _shifted(channel: np.ndarray, scale: float, dx: float, dy: float,
+             centre: Tuple[float, float]) -> np.ndarray:
+    """One image channel magnified by ``scale`` about ``centre``, then moved by (dx, dy)."""
+    if scale == 1.0 and dx == 0.0 and dy == 0.0:
+        return channel
+    cx, cy = centre
+    M = np.array([[scale, 0.0, cx * (1.0 - scale) + dx],
+                  [0.0, scale, cy * (1.0 - scale) + dy]], dtype=np.float64)
+    return cv2.warpAffine(channel, M, (channel.shape[1], channel.shape[0]),
+                          flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+
+
+def _colour_optics(image: np.ndarray, options: RenderOptions,
+                   centre: Tuple[float, float]) -> np.ndarray:
+    """Lateral chromatic aberration and misregistered channels (linear RGB)."""
+    k = float(options.lateral_ca)
+    dx, dy = (float(v) for v in options.channel_shift_px)
+    if k == 0.0 and dx == 0.0 and dy == 0.0:
+        return image
+    red = _shifted(np.ascontiguousarray(image[:, :, 0]), 1.0 + k, dx, dy, centre)
+    blue = _shifted(np.ascontiguousarray(image[:, :, 2]), 1.0 - k, -dx, -dy, centre)
+    return np.dstack([red, image[:, :, 1], blue])
+
+
+def _interlace(image: np.ndarray, shift_px: float) -> np.ndarray:
+    """Replace the odd rows by the scene moved ``shift_px`` to the left (camera panned right)."""
+    if shift_px == 0.0:
+        return image
+    M = np.array([[1.0, 0.0, -shift_px], [0.0, 1.0, 0.0]])
+    later = cv2.warpAffine(image, M, (image.shape[1], image.shape[0]), flags=cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REFLECT)
+    out = image.copy()
+    out[1::2] = later[1::2]
+    return out
+
+
+def _chroma_blur(image: np.ndarray, sigma: float) -> np.ndarray:
+    """Blur the colour differences R - Y and B - Y along the rows (gamma-encoded RGB)."""
+    if sigma <= 0:
+        return image
+    r, g, b = image[:, :, 0], image[:, :, 1], image[:, :, 2]
+    y = 0.299 * r + 0.587 * g + 0.114 * b
+    size = (2 * int(math.ceil(3 * sigma)) + 1, 1)
+    cr = cv2.GaussianBlur(r - y, size, sigma, sigmaY=1e-6, borderType=cv2.BORDER_REFLECT)
+    cb = cv2.GaussianBlur(b - y, size, sigma, sigmaY=1e-6, borderType=cv2.BORDER_REFLECT)
+    r, b = y + cr, y + cb
+    return np.dstack([r, (y - 0.299 * r - 0.114 * b) / 0.587, b])
+
+
+def _finish(linear: np.ndarray, options: RenderOptions, rng: np.random.Generator,
+            centre: Tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """Optics, veiling light, noise, gamma, quantisation and JPEG: linear RGB to BGR uint8."""
     image = linear.astype(np.float32)
     if options.defocus_sigma_px > 0:
@@ -647,11 +830,14 @@ def _finish(linear: np.ndarray, options: RenderOptions, rng: np.random.Generator
         kernel = _motion_kernel(options.motion_blur_px, options.motion_blur_angle_deg)
         image = cv2.filter2D(image, -1, kernel.astype(np.float32),
                              borderType=cv2.BORDER_REFLECT)
+    image = _colour_optics(image, options, centre)
+    image = _interlace(image, float(options.interlace_shift_px))
     image += np.float32(options.ambient)
     if options.shot_noise > 0:
         image += (options.shot_noise * np.sqrt(np.maximum(image, 0.0))
                   * rng.standard_normal(image.shape, dtype=np.float32))
     image = 255.0 * cv2.pow(np.clip(image, 0.0, 1.0), 1.0 / options.gamma)
+    image = _chroma_blur(image, float(options.chroma_blur_px))
     if options.noise_sigma > 0:
         image += np.float32(options.noise_sigma) * rng.standard_normal(
             image.shape, dtype=np.float32)
@@ -755,15 +941,24 @@ def _validate(cards: Sequence[CardPlacement], options: RenderOptions) -> None:
     numbers = {'gain': options.gain, 'ambient': options.ambient,
                'defocus_sigma_px': options.defocus_sigma_px,
                'motion_blur_px': options.motion_blur_px, 'noise_sigma': options.noise_sigma,
-               'shot_noise': options.shot_noise}
+               'shot_noise': options.shot_noise, 'chroma_blur_px': options.chroma_blur_px}
     for name, value in numbers.items():
         if not (_finite(value) and value >= 0):
             raise bad(f'{name} must be a finite number >= 0, got {value!r}')
-    for name in ('gradient', 'gradient_angle_deg', 'motion_blur_angle_deg'):
+    for name in ('gradient', 'gradient_angle_deg', 'motion_blur_angle_deg',
+                 'interlace_shift_px'):
         if not _finite(getattr(options, name)):
             raise bad(f'{name} must be a finite number, got {getattr(options, name)!r}')
     if not (_finite(options.gamma) and options.gamma > 0):
         raise bad(f'gamma must be positive, got {options.gamma!r}')
+    if not (_finite(options.crosstalk) and 0.0 <= options.crosstalk < 0.6):
+        raise bad(f'crosstalk must be a number in [0, 0.6), got {options.crosstalk!r}')
+    if not (_finite(options.lateral_ca) and abs(options.lateral_ca) < 0.1):
+        raise bad(f'lateral_ca must be a number in (-0.1, 0.1), got {options.lateral_ca!r}')
+    shift = np.asarray(options.channel_shift_px, dtype=np.float64)
+    if shift.shape != (2,) or not np.all(np.isfinite(shift)):
+        raise bad(f'channel_shift_px must be 2 finite numbers, got '
+                  f'{options.channel_shift_px!r}')
     cast = np.asarray(options.colour_cast, dtype=np.float64)
     if cast.shape != (3,) or not np.all(np.isfinite(cast)) or np.any(cast < 0):
         raise bad(f'colour_cast must be 3 numbers >= 0, got {options.colour_cast!r}')
@@ -812,7 +1007,11 @@ def render_scene(camera: CameraModel, cards: Sequence[CardPlacement],
     scene = _background(options.background, camera.height, camera.width, background_rng)
     scene = scene * (1.0 - coverage)[:, :, None] + radiance
     scene *= _illumination(options, camera.height, camera.width)
-    image = _finish(scene, options, noise_rng)
+    if options.crosstalk > 0:
+        k = float(options.crosstalk)
+        mix = np.full((3, 3), k / 2.0) + np.eye(3) * (1.0 - 1.5 * k)
+        scene = cv2.transform(scene.astype(np.float32), mix.astype(np.float32))
+    image = _finish(scene, options, noise_rng, (camera.cx, camera.cy))
     truth = tuple(_card_truth(camera, surfaces, k, card) for k, card in enumerate(cards))
     return RenderResult(image, truth)
 

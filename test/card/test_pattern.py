@@ -118,3 +118,49 @@ def test_broken_yaml_file_is_one_clear_error(tmp_path):
 
 def test_defaults_equal_the_shipped_file(cfg):
     assert PatternConfig() == cfg
+
+
+def test_handedness_marks_scale_with_the_card_and_are_chiral(cfg):
+    mark = cfg.handedness_mark
+    assert mark is not None and mark.angles_deg == (22.5, 202.5)
+    # Between the rings, as far from the nearest dot of either ring.
+    assert cfg.mark_radius == pytest.approx(0.85 * cfg.ring_dot_radius)
+    points = cfg.mark_points()
+    dots = cfg.model_points()[1:, :2]
+    gaps = np.sort(np.linalg.norm(points[0] - dots, axis=1))
+    assert gaps[0] == pytest.approx(gaps[1], rel=0.01)
+    # Mirror images fall on blank paper: away from every dot and every mark.
+    mirrored = cfg.mark_points(mirrored=True)
+    assert np.allclose(mirrored, points * [-1.0, 1.0])
+    assert np.min(np.linalg.norm(mirrored[:, None] - points[None], axis=2)) > 3 * cfg.mark_radius
+    assert np.min(np.linalg.norm(mirrored[:, None] - cfg.model_points()[None, :, :2], axis=2)
+                  - cfg.dot_radii()[None]) > 2 * cfg.mark_radius
+    small = pattern_config_from_dict({'card_size': 0.2, 'ring_radii': [0.08, 0.05],
+                                      'ring_dot_radius': 0.01, 'centre_dot_radius': 0.015})
+    assert small.mark_distance == pytest.approx(0.13 / (2 * np.cos(np.pi / 8)))
+
+
+def test_cards_without_marks_and_explicit_marks():
+    paper = pattern_config_from_dict({'handedness_mark': None})
+    assert paper.handedness_mark is None and paper.mark_points().shape == (0, 2)
+    given = pattern_config_from_dict({'handedness_mark': {'angles_deg': [22.5, 157.5],
+                                                          'radius': 0.01, 'distance': 0.095}})
+    assert given.mark_radius == 0.01 and given.mark_distance == 0.095
+
+
+@pytest.mark.parametrize('spec, words', [
+    ({'angles_deg': [22.5, 337.5]}, 'mirror-symmetric'),
+    ({'angles_deg': [0.0]}, 'within'),
+    ({'distance': 0.2}, 'does not fit'),
+    ({'radius': 'big'}, 'numbers'),
+    ('yes', 'mapping'),
+])
+def test_bad_handedness_marks_name_the_problem(spec, words):
+    with pytest.raises(ConfigError, match=words):
+        pattern_config_from_dict({'handedness_mark': spec})
+
+
+def test_a_mirror_reads_points_two_to_eight_backwards():
+    code = Code.parse('B-KRGBBGRG')
+    assert code.mirrored() == Code.parse('B-KGRGBBGR')
+    assert code.mirrored().mirrored() == code

@@ -55,10 +55,10 @@ def svg_root(text: str) -> ET.Element:
     return ET.fromstring(text.encode('utf-8'))
 
 
-def svg_dots(root: ET.Element) -> dict:
+def svg_dots(root: ET.Element, role: str = 'dot') -> dict:
     dots = {}
     for c in root.iter(SVG + 'circle'):
-        if c.get('class') == 'dot':
+        if c.get('class') == role:
             dots[c.get('id')] = (float(c.get('cx')), float(c.get('cy')), float(c.get('r')),
                                  c.get('fill'))
     return dots
@@ -395,12 +395,39 @@ def test_pdf_dots_match_svg_dots():
     (box, content), = pdf_pages(pdf_objects(pdf_document([sheet])))
     assert b'0 0 -2.8346 0 1190.5512 cm' in content          # mm units, y down
     got = sorted(pdf_filled_circles(content))
-    want = sorted((cx, cy, r) for cx, cy, r, _ in svg_dots(svg_root(svg_document(sheet))).values())
-    assert len(got) == len(want) == 17
+    root = svg_root(svg_document(sheet))
+    want = sorted((cx, cy, r) for cx, cy, r, _ in
+                  list(svg_dots(root).values()) + list(svg_dots(root, 'mark').values()))
+    assert len(got) == len(want) == 17 + 2          # the dots and the two handedness marks
     assert np.allclose(got, want, atol=1e-3)
     code = str(config.encode(2, 17, 3)).encode()
     assert b'(floor 2  room 17  card 3   code ' + code + b')' in content
     assert b'(100 mm)' in content
+
+
+@pytest.mark.parametrize('config', [PatternConfig(), small_config()], ids=['shipped', 'small'])
+def test_handedness_marks_are_printed_where_the_config_puts_them(config):
+    sheet = layout_card(config, IDS, 'a3')[0]
+    root = svg_root(svg_document(sheet))
+    dots, marks = svg_dots(root), svg_dots(root, 'mark')
+    centre = np.array(dots['dot-centre'][:2])
+    # Poster y runs down: the pattern's (x, y) is printed at (x, -y) mm from the centre.
+    want = config.mark_points() * 1000.0 * [1.0, -1.0]
+    got = np.array([marks[f'mark-{k}'][:2] for k in (1, 2)]) - centre
+    assert np.allclose(got, want, atol=1e-3)
+    assert all(m[2] == pytest.approx(config.mark_radius * 1000.0) and m[3] == '#{:02x}{:02x}{:02x}'
+               .format(*config.colour_rgb('K')) for m in marks.values())
+    # Nothing is printed where a mirror would show the marks.
+    mirrored = config.mark_points(mirrored=True) * 1000.0 * [1.0, -1.0] + centre
+    for x, y in mirrored:
+        for cx, cy, r, _ in list(dots.values()) + list(marks.values()):
+            assert math.hypot(x - cx, y - cy) > r + config.mark_radius * 1000.0
+
+
+def test_paper_cards_have_no_marks():
+    sheet = layout_card(PatternConfig(handedness_mark=None), IDS, 'a3')[0]
+    root = svg_root(svg_document(sheet))
+    assert svg_dots(root, 'mark') == {} and len(svg_dots(root)) == 17
 
 
 # PNG ------------------------------------------------------------------------

@@ -50,3 +50,23 @@ def test_tables_name_every_bin_and_marker(results):
     for marker in bench.MARKERS:
         assert marker in text
     assert 'Planar flips' in bench.flip_table(res)
+
+
+def test_time_and_quick_tables_have_their_columns(results):
+    _, res = results
+    text = bench.time_table(res)
+    assert 'median' in text and 'p99' in text and 'max' in text and 'both cameras' in text
+    quick = bench.quick_table(res).splitlines()
+    assert len(quick) == 1 + 2 * len(bench.MARKERS)         # far fewer than the full tables
+    assert bench.time_stats([1.0, 2.0, 3.0, float('nan')]) == pytest.approx(
+        (2.0, 2.0, 2.98, 3.0))
+
+
+def test_plots_of_each_run_kind_have_their_own_files(results, tmp_path):
+    _, res = results
+    bench._plots(res, str(tmp_path), 'bench')
+    bench._plots(res, str(tmp_path), 'bench_quick')
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ['bench_errors.png', 'bench_quick_errors.png', 'bench_quick_times.png',
+                     'bench_times.png']
+    assert all(p.stat().st_size > 10_000 for p in tmp_path.iterdir())

@@ -250,10 +250,15 @@ def test_bag_play_command_line_errors(chatter, capsys):
 @pytest.fixture(scope='module')
 def locator(tmp_path_factory):
     """One locator, fresh at the first replay, replayed into again and again."""
-    log = tmp_path_factory.mktemp('replay') / 'locator.txt'
+    tmp = tmp_path_factory.mktemp('replay')
+    # The checked-in bag shows the paper's cards, printed without handedness
+    # marks: the locator is told so (the shipped pattern has marks).
+    pattern = tmp / 'pattern.yaml'
+    pattern.write_text('handedness_mark: null\n')
     # The bag holds still images of the paper's stops, 5 a second: the robot
     # 'jumps' 0.6 m between images, so each image must stand alone.
-    with locator_process(log, ['use_joint_states:=true', 'gates.continuity:=false']) as proc:
+    with locator_process(tmp / 'locator.txt', ['use_joint_states:=true', 'gates.continuity:=false',
+                                               f'pattern_config:={pattern}']) as proc:
         yield proc
 
 

@@ -6,13 +6,15 @@ import numpy as np
 from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.errors import CodeError, ConfigError, ImageError
 from pattern_locator.sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement,
-                                        DotCardTexture, ink_reflectance, Occluder, render_scene,
-                                        RenderOptions)
+                                        DotCardTexture, ink_reflectance, MirroredTexture, Occluder,
+                                        render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.geometry import Pose
 import pytest
 
-CFG = PatternConfig()
+# The paper's card (no handedness marks); the marks have their own tests.
+CFG = PatternConfig(handedness_mark=None)
+MARKED = PatternConfig()
 CODE = Code.parse('R-KRGBBGRG')
 CAMERA = CameraModel.from_focal(320, 240, 300.0)
 # Frontal and upright: card x = camera x, card y = camera -y.
@@ -334,10 +336,105 @@ def test_jpeg_round_trip():
     assert np.mean(np.abs(jpeg.astype(float) - plain)) < 3.0
 
 
+# Handedness marks, mirrors ---------------------------------------------------------------
+
+def test_handedness_marks_are_black_where_the_config_puts_them_and_a_mirror_moves_them():
+    texture = DotCardTexture(MARKED, CODE)
+    marks, mirrored = MARKED.mark_points(), MARKED.mark_points(mirrored=True)
+    black = ink_reflectance(np.array(MARKED.colour_rgb('K')))
+    assert np.allclose(texture.reflectance(marks), black)
+    assert np.allclose(texture.reflectance(mirrored), 0.85)
+    # Just inside and outside a mark's edge.
+    r = MARKED.mark_radius
+    assert np.allclose(texture.reflectance(marks + [0.999 * r, 0.0]), black)
+    assert np.allclose(texture.reflectance(marks + [1.001 * r, 0.0]), 0.85)
+    mirror = MirroredTexture(texture)
+    assert np.allclose(mirror.reflectance(mirrored), black)
+    assert np.allclose(mirror.reflectance(marks), 0.85)
+    # From behind through thin paper: the print fades towards the paper.
+    faded = MirroredTexture(texture, contrast=0.4)
+    assert np.allclose(faded.reflectance(mirrored), 0.85 - 0.4 * (0.85 - black))
+    # The dots of the mirror image are the mirrored code's.
+    points = MARKED.model_points()[1:9, :2]
+    assert np.allclose(mirror.reflectance(points), DotCardTexture(
+        MARKED, CODE.mirrored()).reflectance(points))
+
+
+# Backgrounds, colour optics, sensor and video ------------------------------------------
+
+@pytest.mark.parametrize('kind', ['texture', 'night', 'photo'])
+def test_new_backgrounds_are_seeded_and_look_their_part(kind):
+    first = render_scene(CAMERA, [], RenderOptions(background=kind, seed=5)).image
+    again = render_scene(CAMERA, [], RenderOptions(background=kind, seed=5)).image
+    other = render_scene(CAMERA, [], RenderOptions(background=kind, seed=6)).image
+    assert np.array_equal(first, again) and not np.array_equal(first, other)
+    grey = first.astype(float).mean(axis=2)
+    # Fine texture: neighbouring pixels differ a lot (blur of about a pixel).
+    fine = np.abs(np.diff(grey, axis=1)).mean()
+    if kind == 'texture':
+        assert fine > 8.0
+    elif kind == 'night':
+        assert np.median(grey) < 70.0
+    else:
+        assert np.std(grey) > 30.0
+
+
+def test_channel_shift_and_lateral_colour_move_red_and_blue_only():
+    card = dot_card(frontal_pose(0.6, (0.0, 0.0)))
+    plain = linear(render_scene(CAMERA, [card], PLAIN).image)
+    shifted = linear(render_scene(CAMERA, [card], RenderOptions(
+        background='black', channel_shift_px=(2.0, 0.0))).image)
+    assert np.allclose(shifted[:, :, 1], plain[:, :, 1], atol=1e-9)     # green stays
+    # Red moves right by 2 px, blue left (BGR: red is channel 2).
+    assert np.abs(shifted[:, 40:-40, 2] - plain[:, 38:-42, 2]).max() < 0.02
+    assert np.abs(shifted[:, 40:-40, 0] - plain[:, 42:-38, 0]).max() < 0.02
+    lateral = linear(render_scene(CAMERA, [card], RenderOptions(
+        background='black', lateral_ca=0.01)).image)
+    assert np.allclose(lateral[:, :, 1], plain[:, :, 1], atol=1e-9)
+    assert np.abs(lateral[:, :, 2] - plain[:, :, 2]).max() > 0.1
+
+
+def test_interlace_moves_the_odd_rows():
+    card = dot_card(frontal_pose(0.6, (0.0, 0.0)))
+    plain = render_scene(CAMERA, [card], PLAIN).image
+    combed = render_scene(CAMERA, [card], RenderOptions(background='black',
+                                                        interlace_shift_px=3.0)).image
+    assert np.array_equal(combed[0::2], plain[0::2])
+    assert np.abs(combed[1::2, 10:-10].astype(int) - plain[1::2, 13:-7]).max() <= 1
+
+
+def test_crosstalk_greys_colours_and_keeps_the_grey():
+    card = dot_card(frontal_pose(0.6, (0.0, 0.0)))
+    truth = render_scene(CAMERA, [card], PLAIN).truth[0]
+    plain = linear(render_scene(CAMERA, [card], RenderOptions(background='white')).image)
+    grey = linear(render_scene(CAMERA, [card], RenderOptions(background='white',
+                                                             crosstalk=0.3)).image)
+    for centre, letter in zip(truth.dot_pixels, CFG.dot_colours(CODE)):
+        a, b = plain[pixel_index(centre)], grey[pixel_index(centre)]
+        assert np.ptp(b) <= np.ptp(a) + 1e-3       # less saturated
+    assert np.allclose(grey[5, 5], plain[5, 5], atol=0.01)      # white paper stays white
+
+
+def test_chroma_blur_keeps_the_luma():
+    card = dot_card(frontal_pose(0.6, (0.0, 0.0)))
+    plain = render_scene(CAMERA, [card], PLAIN).image.astype(float)
+    soft = render_scene(CAMERA, [card], RenderOptions(background='black',
+                                                      chroma_blur_px=2.0)).image.astype(float)
+    luma = [0.114, 0.587, 0.299]                     # BGR
+    # The luma stays (but where a blurred colour difference leaves 0..255).
+    assert np.abs(plain @ luma - soft @ luma).mean() < 0.3
+    assert np.abs(plain - soft).max() > 20.0
+
+
 @pytest.mark.parametrize('options, words', [
     (RenderOptions(supersample=0), 'supersample'),
     (RenderOptions(background='forest'), 'background'),
     (RenderOptions(gain=-1.0), 'gain'),
+    (RenderOptions(crosstalk=0.7), 'crosstalk'),
+    (RenderOptions(lateral_ca=0.5), 'lateral_ca'),
+    (RenderOptions(channel_shift_px=(1.0,)), 'channel_shift_px'),
+    (RenderOptions(chroma_blur_px=-1.0), 'chroma_blur_px'),
+    (RenderOptions(interlace_shift_px=float('nan')), 'interlace_shift_px'),
     (RenderOptions(jpeg_quality=0), 'jpeg_quality'),
     (RenderOptions(occluders=(Occluder(3, np.zeros((4, 2))),)), 'card_index'),
     (RenderOptions(occluders=(Occluder(0, np.zeros((2, 2))),)), 'polygon_xy'),
@@ -354,6 +451,8 @@ def test_bad_inputs_raise_package_errors():
         BitmapCardTexture(np.zeros((4, 4), dtype=np.uint8), 0.0)
     with pytest.raises(CodeError):
         DotCardTexture(CFG, Code('X', 'KRGBRGBR'))
+    with pytest.raises(ConfigError, match='contrast'):
+        MirroredTexture(DotCardTexture(CFG, CODE), contrast=0.0)
     with pytest.raises(ConfigError, match='view_angle'):
         card_pose_facing(1.0, 90.0, 0.0)
     with pytest.raises(ConfigError, match='camera'):

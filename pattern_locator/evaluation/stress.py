@@ -1,0 +1,557 @@
+"""
+``pattern-locator bench --stress``: the detector at the edges a real building has.
+
+One row per condition, each on seeded frames of both bench cameras, every
+frame rendered twice from the same pose, light, optics and background: with
+our colour-dot card and with an AprilTag 36h11 card of the same size. Each
+row gives our detection rate (right ids found), wrong ids, time per frame
+(median, mean, p99, max; pose included, single thread) and peak extra memory
+per frame, next to AprilTag 3 with ``quad_decimate=2`` on the same frames
+(``far`` adds AprilTag with ``quad_decimate=1``, the target's reference).
+
+The conditions (all procedural, nothing downloaded):
+
+* ``textures``: the card over fine texture (carpet, gravel, foliage: noise
+  blurred by 0.6-1.2 px), the frames that made thousands of blobs;
+* ``dark noisy``: a dark scene at gain 0.1-0.3 with strong sensor noise;
+* ``photos``: a cluttered room (textured patches, polka dots, shapes, text);
+* ``light <name>``: 14 coloured lights with per-channel gains 0.7-1.4
+  (magenta, red and sodium among them) at gains 0.3-1.3; half of the cards
+  have the code class that a weak green channel used to misread (a green
+  centre and no green dot on the ring);
+* ``chromatic``: red and blue images shifted 0-2 px from the green one, a
+  lens's lateral colour and composite video's narrow chroma band;
+* ``mirror``: the card seen in a mirror, or from behind thin paper against
+  the light (faded): every id read there is wrong;
+* ``dim``: gain 0.3-0.4, warm light, sensor noise;
+* ``blur``: motion blur of 3-7 px;
+* ``occlusion``: an object in front of 10-30 % of the card;
+* ``interlace``: both fields of a panning camera (2-10 px apart);
+* ``far``: 5.5-8 m.
+
+Cards are at 1.25-4 m unless the condition says otherwise, tilted up to 60
+degrees, anywhere in the image.
+"""
+
+from dataclasses import dataclass, field, replace
+import math
+import re
+import time
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import cv2
+import numpy as np
+
+from .baselines import AprilTagLocator, tag_card_bitmap
+from .bench import bench_cameras
+from ..card.pattern import Ids, PatternConfig
+from ..sim.render import (_in_polygon, BitmapCardTexture, card_pose_facing, CardPlacement,
+                          DotCardTexture, MirroredTexture, Occluder, render_scene, RenderOptions)
+from ..vision.camera import CameraModel
+from ..vision.locate import CardLocator
+
+# Lights as (R, G, B) gains relative to white light.
+LIGHTS = (
+    ('neutral', (1.0, 1.0, 1.0)),
+    ('tungsten', (1.4, 1.0, 0.7)),
+    ('warm LED', (1.3, 1.05, 0.8)),
+    ('sodium', (1.4, 0.9, 0.7)),
+    ('magenta', (1.3, 0.7, 1.3)),
+    ('weak green', (1.30, 1.04, 1.22)),
+    ('red wall', (1.4, 0.8, 0.8)),
+    ('purple', (1.1, 0.7, 1.4)),
+    ('daylight', (0.85, 1.0, 1.25)),
+    ('blue LED', (0.7, 0.9, 1.4)),
+    ('cyan', (0.7, 1.2, 1.3)),
+    ('fluorescent', (0.9, 1.2, 0.95)),
+    ('yellow', (1.3, 1.3, 0.7)),
+    ('green', (0.8, 1.4, 0.8)),
+)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One stress frame: where the card is, how it is imaged, what it says."""
+
+    condition: str
+    camera_name: str
+    distance: float
+    view_angle: float
+    azimuth: float
+    roll: float
+    offset_px: Tuple[float, float]
+    options: RenderOptions
+    ids: Ids
+    tag_id: int
+    mirror_contrast: Optional[float] = None     # a mirror image (1 = a real mirror)
+    expected: bool = True                       # False: no id may be read here
+
+
+@dataclass
+class Result:
+    """What one locator did on one frame."""
+
+    found: bool = False
+    wrong_ids: int = 0
+    time_ms: float = math.nan
+    peak_mb: float = math.nan
+
+
+@dataclass
+class Row:
+    """Everything measured for one condition."""
+
+    condition: str
+    frames: List[Frame] = field(default_factory=list)
+    dots: List[Result] = field(default_factory=list)
+    april: List[Result] = field(default_factory=list)
+    april_d1: List[Result] = field(default_factory=list)
+
+
+# Frames -----------------------------------------------------------------------------
+
+def _imaging(rng: np.random.Generator, **overrides) -> RenderOptions:
+    """Ordinary indoor imaging; a condition overrides what it is about."""
+    options = RenderOptions(
+        supersample=2,
+        gain=float(rng.uniform(0.6, 1.1)),
+        colour_cast=tuple(float(c) for c in rng.uniform(0.95, 1.05, 3)),
+        gradient=float(rng.uniform(0.0, 0.25)),
+        gradient_angle_deg=float(rng.uniform(0.0, 360.0)),
+        defocus_sigma_px=float(rng.uniform(0.3, 1.0)),
+        noise_sigma=float(rng.uniform(1.0, 3.0)),
+        shot_noise=float(rng.uniform(0.0, 0.01)),
+        crosstalk=float(rng.uniform(0.0, 0.3)),
+        jpeg_quality=int(rng.integers(80, 96)) if rng.random() < 0.3 else None,
+        background=str(rng.choice(['wall', 'clutter'])),
+        seed=int(rng.integers(1 << 30)))
+    return replace(options, **overrides)
+
+
+def _risky_code(config: PatternConfig, rng: np.random.Generator) -> Ids:
+    """Ids whose code has a green centre and no green dot on the ring, if the layout allows."""
+    ranges = config.id_ranges()
+    for _ in range(200):
+        ids = Ids(int(rng.choice(ranges['floor'])), int(rng.choice(ranges['room'])),
+                  int(rng.choice(ranges['pattern'])))
+        code = config.encode(*ids.as_tuple())
+        if code.centre == 'G' and 'G' not in code.ring:
+            return ids
+    return ids
+
+
+def _occluder(config: PatternConfig, rng: np.random.Generator) -> Occluder:
+    """Make an object over 10-30 % of the card: a band from an edge, a corner, a round thing."""
+    half = config.card_size / 2
+    target = float(rng.uniform(0.10, 0.30))
+    grid = np.linspace(-half, half, 48)
+    gx, gy = np.meshgrid(grid, grid)
+    kind = int(rng.integers(3))
+    angle = float(rng.uniform(0.0, 2 * math.pi))
+    direction = np.array([math.sin(angle), math.cos(angle)])
+    normal = np.array([-direction[1], direction[0]])
+
+    def polygon(depth: float) -> np.ndarray:
+        if kind == 0:       # a band over the edge on the side of `direction`
+            far = 0.3
+            edge = direction * (half * 1.5 - depth)
+            return np.array([edge + normal * far, edge - normal * far,
+                             edge - normal * far + direction * far,
+                             edge + normal * far + direction * far])
+        if kind == 1:       # a corner
+            corner = np.sign(direction + 1e-9) * half
+            leg = depth * 2.0
+            return np.array([corner, corner - [np.sign(corner[0]) * leg, 0.0],
+                             corner - [0.0, np.sign(corner[1]) * leg]])
+        # a round object (a hand, a head) entering from one side
+        radius = 0.12
+        centre = direction * (half + radius - depth)
+        t = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
+        return centre + radius * np.column_stack([np.cos(t), np.sin(t)])
+
+    def covered(depth: float) -> float:
+        return float(np.mean(_in_polygon(gx, gy, polygon(depth))))
+
+    lo, hi = 0.0, config.card_size * 1.2
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if covered(mid) < target else (lo, mid)
+    colours = [(0.35, 0.3, 0.28), (0.6, 0.45, 0.38), (0.05, 0.05, 0.06), (0.8, 0.8, 0.78)]
+    return Occluder(0, polygon(0.5 * (lo + hi)), colours[int(rng.integers(len(colours)))])
+
+
+def _condition_makers() -> Dict[str, Callable]:
+    """Return, per condition, a function (rng, config) -> (frame overrides, options)."""
+
+    def plain(rng, config):
+        return {}, _imaging(rng)
+
+    def textures(rng, config):
+        return {}, _imaging(rng, background='texture')
+
+    def dark(rng, config):
+        return {}, _imaging(rng, background='night', gain=float(rng.uniform(0.1, 0.3)),
+                            noise_sigma=float(rng.uniform(3.0, 6.0)),
+                            shot_noise=float(rng.uniform(0.02, 0.05)), jpeg_quality=None)
+
+    def photos(rng, config):
+        return {}, _imaging(rng, background='photo')
+
+    def light(gains):
+        def make(rng, config):
+            extra = {'ids': _risky_code(config, rng)} if rng.random() < 0.5 else {}
+            cast = np.asarray(gains) * rng.uniform(0.97, 1.03, 3)
+            return extra, _imaging(rng, gain=float(rng.uniform(0.3, 1.3)),
+                                   colour_cast=tuple(float(c) for c in cast))
+        return make
+
+    def chromatic(rng, config):
+        shift = float(rng.uniform(0.0, 2.0))
+        angle = float(rng.uniform(0.0, 2 * math.pi))
+        return {}, _imaging(rng, channel_shift_px=(shift * math.cos(angle),
+                                                   shift * math.sin(angle)),
+                            lateral_ca=float(rng.uniform(-0.003, 0.003)),
+                            chroma_blur_px=float(rng.choice([0.0, rng.uniform(0.5, 2.0)])))
+
+    def mirror(rng, config):
+        contrast = 1.0 if rng.random() < 0.6 else float(rng.uniform(0.3, 0.6))
+        return {'mirror_contrast': contrast, 'expected': False}, _imaging(rng)
+
+    def dim(rng, config):
+        warm = np.array([1.25, 1.0, 0.75]) * rng.uniform(0.95, 1.05, 3)
+        return {}, _imaging(rng, gain=float(rng.uniform(0.3, 0.4)),
+                            colour_cast=tuple(float(c) for c in warm),
+                            noise_sigma=float(rng.uniform(2.0, 4.0)),
+                            shot_noise=float(rng.uniform(0.01, 0.02)))
+
+    def blur(rng, config):
+        return {}, _imaging(rng, motion_blur_px=float(rng.uniform(3.0, 7.0)),
+                            motion_blur_angle_deg=float(rng.uniform(0.0, 180.0)))
+
+    def occlusion(rng, config):
+        return {}, _imaging(rng, occluders=(_occluder(config, rng),))
+
+    def interlace(rng, config):
+        shift = float(rng.uniform(2.0, 10.0)) * (1 if rng.random() < 0.5 else -1)
+        # The head pans during each field's exposure too. An analog camera's
+        # frame grabber delivers YUV 4:2:2 (chroma halved along the rows),
+        # not JPEG: JPEG would mix the two fields' colours in its 2x2 chroma.
+        return {}, _imaging(rng, interlace_shift_px=shift,
+                            motion_blur_px=abs(shift) * float(rng.uniform(0.2, 0.5)),
+                            motion_blur_angle_deg=0.0, jpeg_quality=None,
+                            chroma_blur_px=float(rng.choice([0.0, 1.0])))
+
+    def far(rng, config):
+        return {'distance': float(rng.uniform(5.5, 8.0))}, _imaging(rng)
+
+    makers = {'plain': plain, 'textures': textures, 'dark noisy': dark, 'photos': photos}
+    makers.update({f'light {name}': light(gains) for name, gains in LIGHTS})
+    makers.update({'chromatic': chromatic, 'mirror': mirror, 'dim': dim, 'blur': blur,
+                   'occlusion': occlusion, 'interlace': interlace, 'far': far})
+    return makers
+
+
+CONDITIONS = tuple(_condition_makers())
+
+
+def make_frames(config: PatternConfig, per_camera: int, seed: int,
+                conditions: Sequence[str] = CONDITIONS) -> List[Frame]:
+    """Seeded frames: every condition, every bench camera, ``per_camera`` each."""
+    makers = _condition_makers()
+    ranges = config.id_ranges()
+    frames = []
+    for c, condition in enumerate(conditions):
+        rng = np.random.default_rng([seed, c])
+        for camera_name, camera in bench_cameras().items():
+            for _ in range(per_camera):
+                distance = float(rng.uniform(1.25, 4.0))
+                view = float(rng.uniform(0.0, 60.0))
+                ids = Ids(int(rng.choice(ranges['floor'])), int(rng.choice(ranges['room'])),
+                          int(rng.choice(ranges['pattern'])))
+                extra, options = makers[condition](rng, config)
+                distance = extra.pop('distance', distance)
+                half = 0.5 * config.card_size * camera.fx / distance * 1.3 + 8
+                max_u = max(0.0, camera.width / 2 - half)
+                max_v = max(0.0, camera.height / 2 - half)
+                offset = (float(rng.uniform(-max_u, max_u)), float(rng.uniform(-max_v, max_v)))
+                frames.append(Frame(condition, camera_name, distance, view,
+                                    float(rng.uniform(0.0, 360.0)),
+                                    float(rng.uniform(-30.0, 30.0)), offset, options,
+                                    extra.pop('ids', ids), int(rng.integers(0, 587)), **extra))
+    return frames
+
+
+def render_frame(frame: Frame, camera: CameraModel, config: PatternConfig,
+                 marker: str) -> np.ndarray:
+    """Render the frame with our card (``'dots'``) or with an AprilTag card."""
+    T = card_pose_facing(frame.distance, frame.view_angle, frame.azimuth, roll_deg=frame.roll,
+                         offset_px=frame.offset_px, camera=camera)
+    if marker == 'dots':
+        texture = DotCardTexture(config, config.encode(*frame.ids.as_tuple()))
+    else:
+        texture = BitmapCardTexture(tag_card_bitmap('apriltag', frame.tag_id, 8),
+                                    config.card_size)
+    if frame.mirror_contrast is not None:
+        texture = MirroredTexture(texture, frame.mirror_contrast)
+    return render_scene(camera, [CardPlacement(T, texture)], frame.options).image
+
+
+# Measuring --------------------------------------------------------------------------
+
+def _memory_kb() -> Optional[Tuple[int, int]]:
+    try:
+        text = open('/proc/self/status').read()
+        rss = int(re.search(r'VmRSS:\s+(\d+)', text).group(1))
+        hwm = int(re.search(r'VmHWM:\s+(\d+)', text).group(1))
+        return rss, hwm
+    except (OSError, AttributeError):
+        return None
+
+
+def exact_memory_accounting() -> None:
+    """
+    Make freed memory leave the process at once, so each frame's peak is its own.
+
+    glibc raises its mmap threshold after large frees and then keeps big
+    blocks in the heap, where a later frame reuses them without raising
+    the resident high-water mark. A fixed threshold (128 kB) returns every
+    large block to the system when freed. Only the benchmark does this.
+    """
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL('libc.so.6')
+        libc.mallopt(-3, 128 * 1024)        # M_MMAP_THRESHOLD
+        libc.mallopt(-1, 128 * 1024)        # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        pass
+
+
+def peak_extra_mb(run: Callable[[], object]) -> float:
+    """
+    Peak resident memory (MB) that ``run()`` adds to the process; NaN if unknown.
+
+    Linux's high-water mark is reset (``/proc/self/clear_refs``) before the
+    call and read after it, so native allocations (OpenCV, AprilTag) count.
+    """
+    try:
+        with open('/proc/self/clear_refs', 'w') as f:
+            f.write('5')
+    except OSError:
+        return math.nan
+    before = _memory_kb()
+    run()
+    after = _memory_kb()
+    if before is None or after is None:
+        return math.nan
+    return max(0.0, (after[1] - before[0]) / 1024.0)
+
+
+def _run_dots(locator: CardLocator, image: np.ndarray, camera: CameraModel,
+              frame: Frame) -> Result:
+    start = time.perf_counter()
+    located = locator.locate(image, camera)
+    elapsed = (time.perf_counter() - start) * 1000.0
+    out = Result(time_ms=elapsed)
+    for card in located:
+        if card.detection.ids is None:
+            continue
+        if not frame.expected or card.detection.ids != frame.ids:
+            out.wrong_ids += 1
+        elif card.T_camera_pattern is not None:
+            out.found = True
+    out.peak_mb = peak_extra_mb(lambda: locator.locate(image, camera))
+    return out
+
+
+def _run_april(april: AprilTagLocator, image: np.ndarray, camera: CameraModel,
+               frame: Frame) -> Result:
+    start = time.perf_counter()
+    found = april.detect(image, camera)
+    elapsed = (time.perf_counter() - start) * 1000.0
+    out = Result(time_ms=elapsed)
+    for det in found:
+        if not frame.expected or det.tag_id != frame.tag_id:
+            out.wrong_ids += 1
+        else:
+            out.found = True
+    out.peak_mb = peak_extra_mb(lambda: april.detect(image, camera))
+    return out
+
+
+def run_frames(frames: Sequence[Frame], config: PatternConfig, progress: bool = True
+               ) -> Dict[str, Row]:
+    """Render and measure every frame; rows in condition order."""
+    from tqdm import tqdm
+
+    exact_memory_accounting()
+    cameras = bench_cameras()
+    ours = CardLocator(config)
+    april = AprilTagLocator(config.card_size)
+    april_d1 = AprilTagLocator(config.card_size, quad_decimate=1.0)
+    rows: Dict[str, Row] = {}
+    for frame in tqdm(frames, desc='stress frames', unit='frame', leave=False,
+                      disable=None if progress else True):
+        camera = cameras[frame.camera_name]
+        row = rows.setdefault(frame.condition, Row(frame.condition))
+        row.frames.append(frame)
+        row.dots.append(_run_dots(ours, render_frame(frame, camera, config, 'dots'), camera,
+                                  frame))
+        tag_image = render_frame(frame, camera, config, 'apriltag')
+        row.april.append(_run_april(april, tag_image, camera, frame))
+        if frame.condition == 'far':
+            row.april_d1.append(_run_april(april_d1, tag_image, camera, frame))
+    return rows
+
+
+# Tables -----------------------------------------------------------------------------
+
+def _stats(values: Sequence[float]) -> Tuple[float, float, float, float]:
+    """Median, mean, p99 and max of the finite values (NaN when none)."""
+    v = np.asarray([x for x in values if not math.isnan(x)], dtype=float)
+    if v.size == 0:
+        return (math.nan,) * 4
+    return (float(np.median(v)), float(np.mean(v)), float(np.percentile(v, 99)),
+            float(np.max(v)))
+
+
+def _rate(results: Sequence[Result], frames: Sequence[Frame]) -> float:
+    expected = [r for r, f in zip(results, frames) if f.expected]
+    if not expected:
+        return math.nan
+    return 100.0 * sum(r.found for r in expected) / len(expected)
+
+
+def _num(value: float, digits: int = 1, width: int = 7) -> str:
+    return f'{"-":>{width}}' if math.isnan(value) else f'{value:>{width}.{digits}f}'
+
+
+def stress_table(rows: Dict[str, Row]) -> str:
+    """Return one line per condition: ours and AprilTag (decimate 2) side by side."""
+    head = (f'{"condition":<20}{"n":>4} | {"det %":>6}{"wrong":>6}{"med ms":>7}{"mean":>7}'
+            f'{"p99":>7}{"max":>7}{"MB":>6} | {"det %":>6}{"wrong":>6}{"med ms":>7}'
+            f'{"mean":>7}{"p99":>7}{"max":>7}{"MB":>6} | {"med x":>6}{"mean x":>7}'
+            f'{"p99 x":>6}{"max x":>6}')
+    lines = ['\n### Stress conditions: ours (left) and AprilTag 3, decimate 2 (right), '
+             'same frames, single thread',
+             f'{"":<25}| {"colour dots (pose included)":^46}| '
+             f'{"AprilTag 36h11 (pose included)":^46}| ratio ours / AprilTag',
+             head]
+    every: Row = Row('all conditions')
+    for row in list(rows.values()) + [every]:
+        if row is not every:
+            every.frames += row.frames
+            every.dots += row.dots
+            every.april += row.april
+        ours = _stats([r.time_ms for r in row.dots])
+        theirs = _stats([r.time_ms for r in row.april])
+        ratios = [a / b if b > 0 else math.nan for a, b in zip(ours, theirs)]
+        lines.append(
+            f'{row.condition:<20}{len(row.frames):>4} | {_num(_rate(row.dots, row.frames), 1, 6)}'
+            f'{sum(r.wrong_ids for r in row.dots):>6}' + ''.join(_num(v, 1) for v in ours)
+            + _num(max((r.peak_mb for r in row.dots), default=math.nan), 0, 6)
+            + f' | {_num(_rate(row.april, row.frames), 1, 6)}'
+            f'{sum(r.wrong_ids for r in row.april):>6}' + ''.join(_num(v, 1) for v in theirs)
+            + _num(max((r.peak_mb for r in row.april), default=math.nan), 0, 6)
+            + ' | ' + _num(ratios[0], 2, 6) + _num(ratios[1], 2, 7) + _num(ratios[2], 2, 6)
+            + _num(ratios[3], 2, 6))
+    if 'far' in rows and rows['far'].april_d1:
+        far = rows['far']
+        lines.append(f'far: AprilTag with decimate 1 finds {_rate(far.april_d1, far.frames):.1f} %'
+                     f' ({sum(r.wrong_ids for r in far.april_d1)} wrong ids)')
+    lines.append('det % = right id with a pose, of the frames where one is expected (none in '
+                 'mirror); wrong = ids read that are not the card (any id in a mirror); MB = '
+                 'largest peak extra resident memory of one frame')
+    return '\n'.join(lines)
+
+
+def _conditions_matching(rows: Dict[str, Row], prefix: str) -> Row:
+    merged = Row(prefix)
+    for name, row in rows.items():
+        if name == prefix or name.startswith(prefix + ' '):
+            merged.frames += row.frames
+            merged.dots += row.dots
+            merged.april += row.april
+            merged.april_d1 += row.april_d1
+    return merged
+
+
+def targets_table(rows: Dict[str, Row]) -> str:
+    """Issue 9's targets, each with the figure measured here and met / not met."""
+    lines = ['\n### Targets (issue 9)', f'{"target":<58}{"measured":>18}  verdict']
+
+    def add(text: str, value: str, ok: Optional[bool]) -> None:
+        verdict = '-' if ok is None else ('met' if ok else 'NOT MET')
+        lines.append(f'{text:<58}{value:>18}  {verdict}')
+
+    wrong = sum(r.wrong_ids for row in rows.values() for r in row.dots)
+    add('0 wrong ids in every condition', f'{wrong}', wrong == 0)
+    ours = [r.time_ms for row in rows.values() for r in row.dots]
+    theirs = [r.time_ms for row in rows.values() for r in row.april]
+    a, b = _stats(ours), _stats(theirs)
+    for name, i, limit in (('median', 0, 0.25), ('mean', 1, 0.35), ('p99', 2, 0.5),
+                           ('max', 3, 1.0)):
+        ratio = a[i] / b[i] if b[i] > 0 else math.nan
+        add(f'time {name} <= {limit:g}x AprilTag (all stress frames)', f'{ratio:.2f}x',
+            ratio <= limit if not math.isnan(ratio) else None)
+    hd = [r.peak_mb for row in rows.values() for f, r in zip(row.frames, row.dots)
+          if f.camera_name.startswith('1280x720')]
+    peak = max(hd, default=math.nan)
+    add('peak extra memory <= 100 MB per frame at 1280x720', f'{peak:.0f} MB',
+        None if math.isnan(peak) else peak <= 100.0)
+    light = _conditions_matching(rows, 'light')
+    for dim in ('dim',):
+        if dim in rows:
+            light.frames += rows[dim].frames
+            light.dots += rows[dim].dots
+    for text, row, limit in (
+            ('>= 99 % in any light (gain 0.3-1.3, casts to 1.4x)', light, 99.0),
+            ('>= 85 % with motion blur up to 7 px', rows.get('blur'), 85.0),
+            ('>= 80 % with 10-30 % of the card occluded', rows.get('occlusion'), 80.0),
+            ('>= 85 % on interlaced frames of a panning camera', rows.get('interlace'), 85.0)):
+        if row is None or not row.frames:
+            continue
+        rate = _rate(row.dots, row.frames)
+        add(text, f'{rate:.1f} %', rate >= limit)
+    if 'far' in rows and rows['far'].april_d1:
+        far = rows['far']
+        ours_far, d1 = _rate(far.dots, far.frames), _rate(far.april_d1, far.frames)
+        add('5.5-8 m: >= AprilTag (decimate 1) + 10 points',
+            f'{ours_far:.1f} vs {d1:.1f} %', ours_far >= d1 + 10.0)
+    return '\n'.join(lines)
+
+
+def run_stress(per_camera: int = 10, seed: int = 1, quick: bool = False,
+               output_dir: Optional[str] = 'out') -> int:
+    """Run every condition and print the table and the targets; returns the exit status."""
+    from ..card.pattern import load_pattern_config
+
+    cv2.setNumThreads(1)
+    exact_memory_accounting()
+    config = load_pattern_config()
+    n = 1 if quick else per_camera
+    if quick:
+        print(f'pattern_locator bench --stress --quick: a SMOKE TEST ({n} frame per condition '
+              f'and camera); its figures are noise, not a measurement.')
+    else:
+        print(f'pattern_locator bench --stress: {n} frames per condition and camera, '
+              f'seed {seed}, single-threaded')
+    rows = run_frames(make_frames(config, n, seed), config)
+    print(stress_table(rows))
+    print(targets_table(rows))
+    if output_dir:
+        from .bench_plots import time_plot
+
+        times = {}
+        for name, row in rows.items():
+            times[f'{name}: dots'] = [r.time_ms for r in row.dots]
+            times[f'{name}: AprilTag'] = [r.time_ms for r in row.april]
+        kind = 'bench_stress_quick' if quick else 'bench_stress'
+        path = time_plot(times, output_dir, kind, 'Time per frame under stress (single thread, '
+                                                  'pose included)')
+        print(f'\nplot: {path}')
+    return 0
+
+
+__all__ = ['CONDITIONS', 'Frame', 'LIGHTS', 'make_frames', 'peak_extra_mb', 'render_frame',
+           'run_frames', 'run_stress', 'stress_table', 'targets_table']

@@ -1,0 +1,362 @@
+"""
+Cards: which blobs could be a centre dot with its rings, and which dot is in which slot.
+
+Work is bounded: every blob's evidence (the blobs of ring-dot size within
+ring reach of it) is counted in one pass over a grid of counts, so the cost
+grows with the pixels and the number of blobs, never with its square. The
+best candidates by that evidence are examined, at most
+``DetectorParams.max_candidates`` of them.
+
+A candidate is examined in the centre blob's own affine frame, where the
+rings are near circles of radii ``R / r_centre``: a vote over the
+neighbours gives the rings' scale and the angle of the 45-degree slots,
+each neighbour goes to its nearest slot, and a homography fitted to the
+assigned dots (undistorted when the camera is known) verifies the card and
+drops dots off the fit. Slot ``k`` is taken as point ``k + 1`` until the
+colours say which slot holds point 1.
+"""
+
+from dataclasses import dataclass
+import math
+from typing import Optional, Tuple
+
+import cv2
+import numpy as np
+
+from .camera import CameraModel
+from .detector_params import DetectorParams
+from .dots import Blobs
+from ..card.pattern import PatternConfig, RING_POINTS
+
+# Candidate centres: at least this big (image pixels), and this many neighbours.
+MIN_CENTRE_AREA = 10.0
+MIN_NEIGHBOURS = 6
+# Grid cell (image pixels) of the evidence counts.
+_CELL = 16
+# Candidates looked at more closely, per candidate examined.
+_SHORTLIST = 4
+
+
+@dataclass(frozen=True)
+class CardGuess:
+    """A centre blob, the blobs assigned to the ring slots and the plane-to-image map."""
+
+    centre: int                     # index in `blobs`
+    slot_blob: np.ndarray           # (n_rings, 8) blob index per slot, -1 where none
+    homography: np.ndarray          # slot-ordered pattern plane (m) -> undistorted pixels
+    blobs: Blobs
+
+
+def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
+                    noise: Optional[np.ndarray] = None) -> np.ndarray:
+    """
+    Return candidate centre blobs (indices), strongest evidence first, max_candidates at most.
+
+    Evidence is the number of blobs between 0.06 and 1 times a blob's area
+    within reach of its outer ring (1.5 times the ring's radius for a centre
+    of its extent, which covers tilts to 75 degrees), counted with summed
+    area tables over a coarse grid, one per octave of blob area; counts
+    beyond a card's are not more evidence, and ties go to the blob in the
+    quietest surroundings (``noise``, per blob). When many remain, the
+    shortlist is ranked by how ring-like its neighbours are.
+    """
+    n = len(blobs)
+    if n < 1 + MIN_NEIGHBOURS:
+        return np.zeros(0, dtype=np.intp)
+    area = blobs.area
+    half = 0.5 * blobs.scale * np.maximum(blobs.box[:, 2], blobs.box[:, 3]).astype(float)
+    centre_like = area >= MIN_CENTRE_AREA
+    if not np.any(centre_like):
+        return np.zeros(0, dtype=np.intp)
+    rho_out = config.ring_radii[0] / config.centre_dot_radius
+    reach = 1.5 * rho_out * np.maximum(half, np.sqrt(area / np.pi)) + 2.0
+    gx = np.maximum(blobs.u, 0.0).astype(np.intp) // _CELL
+    gy = np.maximum(blobs.v, 0.0).astype(np.intp) // _CELL
+    gw, gh = int(gx.max()) + 1, int(gy.max()) + 1
+    octave = np.floor(np.log2(np.maximum(area, 1.0))).astype(np.intp)
+    first = int(octave.min())
+    levels = int(octave.max()) - first + 1
+    counts = np.bincount(((octave - first) * gh + gy) * gw + gx,
+                         minlength=levels * gh * gw).reshape(levels, gh, gw)
+    # table[k, y, x]: blobs of octave <= first + k - 1 in cells [0, y) x [0, x).
+    table = np.zeros((levels + 1, gh + 1, gw + 1), dtype=np.int32)
+    table[1:, 1:, 1:] = counts.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)
+    idx = np.flatnonzero(centre_like)
+    lo = np.clip(np.floor(np.log2(0.06 * area[idx])).astype(np.intp) - first, 0, levels)
+    hi = np.clip(octave[idx] - first + 1, 0, levels)
+    x0 = np.clip(((blobs.u[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gw)
+    x1 = np.clip(((blobs.u[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gw)
+    y0 = np.clip(((blobs.v[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gh)
+    y1 = np.clip(((blobs.v[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gh)
+
+    def box(level):
+        return (table[level, y1, x1] - table[level, y0, x1] - table[level, y1, x0]
+                + table[level, y0, x0])
+
+    evidence = box(hi) - box(lo) - 1
+    strong = evidence >= MIN_NEIGHBOURS
+    idx, evidence = idx[strong], evidence[strong]
+    # A card's two rings and its marks make 18 neighbours: more say a crowd
+    # (texture, foliage), not more card. Among the crowded, the quietest
+    # surroundings first: a card's paper is smooth.
+    quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
+    order = np.lexsort((-area[idx], quiet, -np.minimum(evidence, 2 * RING_POINTS + 2)))
+    idx = idx[order[:_SHORTLIST * params.max_candidates]]
+    if len(idx) <= params.max_candidates:
+        return idx
+    # Many blobs crowd the shortlist (a textured floor, foliage): a card's
+    # ring dots are alike in size and all round their centre.
+    score = _ring_evidence(blobs, idx, reach)
+    quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
+    return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
+
+
+def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """
+    How much the blobs round each candidate look like a card's rings.
+
+    The neighbours within reach (found through the blobs sorted by column,
+    so each candidate costs the blobs in its own reach) of a ring dot's size
+    (a third of the centre's, give or take perspective and blur) that are of
+    one size (within a factor 1.6 of their median), and the octants they
+    cover.
+    """
+    order = np.argsort(blobs.u, kind='stable')
+    su = blobs.u[order]
+    score = np.zeros(len(idx))
+    for i, ci in enumerate(idx):
+        r = reach[ci]
+        lo, hi = np.searchsorted(su, [blobs.u[ci] - r, blobs.u[ci] + r])
+        near = order[lo:hi]
+        dv = blobs.v[near] - blobs.v[ci]
+        ratio = blobs.area[near] / blobs.area[ci]
+        keep = (np.abs(dv) < r) & (ratio > 0.12) & (ratio < 0.9)
+        near, dv = near[keep], dv[keep]
+        if len(near) < MIN_NEIGHBOURS:
+            continue
+        a = blobs.area[near]
+        typical = np.median(a)
+        alike = (a > typical / 1.6) & (a < typical * 1.6)
+        du = blobs.u[near[alike]] - blobs.u[ci]
+        octant = (np.floor((np.arctan2(dv[alike], du) + np.pi) / (np.pi / 4)).astype(int)) % 8
+        score[i] = min(np.count_nonzero(alike), 2 * RING_POINTS + 2) + 2 * len(set(octant))
+    return score
+
+
+def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
+          camera: Optional[CameraModel]) -> Optional[CardGuess]:
+    """Assign the blobs round centre blob ``ci`` to ring slots; None if no card is there."""
+    ring_rho = np.array(config.ring_radii) / config.centre_dot_radius
+    # Normalising map: the centre blob's ellipse -> unit circle (radius = centre dot).
+    evals, evecs = np.linalg.eigh(blobs.covariance(ci))
+    if evals[0] <= 0:
+        return None
+    semi = 2.0 * np.sqrt(evals)                 # semi-axes of the centre dot, px
+    if semi[0] < 0.8:
+        return None
+    fill = blobs.area[ci] / (np.pi * semi[0] * semi[1])
+    if not params.min_ellipse_fill <= fill <= 1.4:
+        return None
+    # Only blobs within reach of the outer ring are looked at: O(blobs) per candidate.
+    reach = 1.7 * ring_rho[0] * semi[1]
+    du, dv = blobs.u - blobs.u[ci], blobs.v - blobs.v[ci]
+    ratio = blobs.area / blobs.area[ci]
+    # Ring dots are a third of the centre's area (more or less with
+    # perspective and blur); specks of noise are far smaller.
+    near = np.flatnonzero((np.abs(du) < reach) & (np.abs(dv) < reach)
+                          & (ratio < 1.2) & (ratio > 0.08))
+    if len(near) < RING_POINTS - 2:
+        return None
+    offsets = np.column_stack([du[near], dv[near]])
+    for to_unit in _normalisers(evecs, semi, offsets, ring_rho):
+        slot_blob = _assign(offsets @ to_unit.T, near, ring_rho)
+        if slot_blob is not None:
+            guess = _verify(blobs, ci, slot_blob, config, params, camera)
+            if guess is not None:
+                return guess
+    return None
+
+
+def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
+            params: DetectorParams, camera: Optional[CameraModel]) -> Optional[CardGuess]:
+    """Fit the plane-to-image homography to the assigned blobs; None if it does not hold."""
+    n_rings = slot_blob.shape[0]
+    # Slot order k increases clockwise in the image (v down) = clockwise on the
+    # card seen from the front, unless the image is a mirror's (checked later).
+    slot_xy = config.model_points()[1:, :2].reshape(n_rings, RING_POINTS, 2)
+    pos = np.argwhere(slot_blob >= 0)
+    obj = np.vstack([slot_xy[pos[:, 0], pos[:, 1]], [[0.0, 0.0]]])
+    js = np.append(slot_blob[pos[:, 0], pos[:, 1]], ci)
+    img = np.column_stack([blobs.u[js], blobs.v[js]])
+    und = camera.undistort_pixels(img) if camera is not None else img
+    radii = np.full(len(obj), config.ring_dot_radius)
+    radii[-1] = config.centre_dot_radius
+    # Blob centroids are rough (decimated, and a colour channel shifted by a
+    # lens moves some inks' blobs): a first guess, checked again by the
+    # measured centres.
+    H, inliers = fit_homography(obj, und, radii, 1.6 * params.max_homography_error,
+                                min_tolerance=0.75 * blobs.scale)
+    if H is None:
+        return None
+    slot_blob = slot_blob.copy()
+    for (r, kk), good in zip(pos, inliers[:-1]):
+        if not good:
+            slot_blob[r, kk] = -1
+    seen = slot_blob >= 0
+    if np.count_nonzero(seen) < 7 or np.count_nonzero(seen.any(axis=0)) < 5:
+        return None
+    return CardGuess(ci, slot_blob, H, blobs)
+
+
+def _normalisers(evecs: np.ndarray, semi: np.ndarray, offsets: np.ndarray,
+                 ring_rho: np.ndarray):
+    """
+    Yield maps taking the card's rings to circles of radii ``ring_rho``, best guess first.
+
+    First the centre blob's own ellipse to the unit circle. A small centre
+    blob (a far card) is a poor guide to its own shape; the ring dots
+    round it are a better one: the second moments of points spread evenly
+    on circles of radii R are R^2 / 2 along any axis, so the neighbours'
+    moments map back to circles too (their mean radius put at the rings').
+    """
+    yield evecs @ np.diag(1.0 / semi) @ evecs.T
+    cov = offsets.T @ offsets / len(offsets)
+    w, v = np.linalg.eigh(cov)
+    if w[0] > 0:
+        target = np.sqrt(np.mean(ring_rho ** 2) / 2.0)
+        yield v @ np.diag(target / np.sqrt(w)) @ v.T
+
+
+def _assign(rel: np.ndarray, near: np.ndarray, ring_rho: np.ndarray) -> Optional[np.ndarray]:
+    """Give neighbours (``rel``: in the rings-as-circles frame) their (ring, slot); None if few."""
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    keep = (rho > 0.55 * ring_rho[-1]) & (rho < 1.6 * ring_rho[0])
+    near, rel, rho = near[keep], rel[keep], rho[keep]
+    if len(near) < RING_POINTS - 2:
+        return None
+    ang = np.arctan2(rel[:, 1], rel[:, 0])
+    slots = _vote_slots(rho, ang, ring_rho)
+    if slots is None:
+        return None
+    scale, phase = slots
+    # Each neighbour to (ring, slot) by its predicted position, best first.
+    k = np.round(wrap(ang - phase) / (np.pi / 4)).astype(int) % RING_POINTS
+    dang = np.abs(wrap(ang - (phase + k * np.pi / 4)))
+    n_rings = len(ring_rho)
+    dr = np.abs(rho[:, None] / (scale * ring_rho[None, :]) - 1.0)      # (N, R)
+    ring = np.argmin(dr, axis=1)
+    cost = dr[np.arange(len(near)), ring] + dang
+    ok = (dr[np.arange(len(near)), ring] < 0.25) & (dang < 0.35)
+    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
+    for i in np.flatnonzero(ok)[np.argsort(cost[ok])[::-1]]:
+        slot_blob[ring[i], k[i]] = near[i]          # the cheapest is written last
+    per_ring = np.count_nonzero(slot_blob >= 0, axis=1)
+    if per_ring.sum() < 8 or per_ring.max() < 5:
+        return None
+    return slot_blob
+
+
+def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray
+                ) -> Optional[Tuple[float, float]]:
+    """
+    Scale of the rings and angle of slot 0, by voting over neighbours.
+
+    Every neighbour, taken as a dot of every ring, proposes a scale and a
+    slot angle; the proposal that puts most neighbours on a ring and a
+    45-degree slot wins.
+    """
+    scale = (rho[:, None] / ring_rho[None, :]).ravel()          # (A,)
+    phase = np.repeat(ang, len(ring_rho))                          # (A,)
+    ok_scale = (scale > 0.55) & (scale < 1.6)
+    if not np.any(ok_scale):
+        return None
+    scale, phase = scale[ok_scale], phase[ok_scale]
+    dang = wrap(ang[None, :] - phase[:, None])                      # (A, N)
+    dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
+    r_exp = scale[:, None, None] * ring_rho[None, None, :]          # (A, 1, R)
+    dr = np.min(np.abs(rho[None, :, None] / r_exp - 1.0), axis=2)  # (A, N)
+    on_ring = (dr < 0.2) & (dslot < 0.3)
+    count = np.count_nonzero(on_ring, axis=1)
+    # Soft agreement: a card's dots sit on their rings and slots to within a
+    # few percent and degrees; blobs of a textured floor round a centre only
+    # roughly. Among equal scores, the scale the centre's own size predicts.
+    fit = np.sum(on_ring * np.exp(-(dslot / 0.15) ** 2 - (dr / 0.1) ** 2), axis=1)
+    best = int(np.argmax(fit - 0.5 * np.abs(np.log(scale))))
+    if count[best] < RING_POINTS - 2:
+        return None
+    return float(scale[best]), float(phase[best])
+
+
+# Plane geometry -------------------------------------------------------------------
+
+def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_error: float,
+                   min_tolerance: float = 0.75, min_points: int = 6):
+    """
+    Homography from plane points to pixels with outlier rejection.
+
+    A point is an outlier when it is off the fit by more than ``max_error``
+    times its dot's image radius (``radii`` in metres), at least
+    ``min_tolerance`` pixels. The last point (the centre) must be an
+    inlier. Returns ``(H, inliers)`` or ``(None, None)``.
+    """
+    if len(obj) < min_points:
+        return None, None
+    inliers = np.ones(len(obj), dtype=bool)
+    tol = None
+    for _ in range(4):
+        H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
+        if H is None or not np.all(np.isfinite(H)):
+            return None, None
+        err = np.linalg.norm(apply_h(H, obj) - img, axis=1)
+        if tol is None:
+            tol = np.maximum(max_error * h_scale(H, obj) * radii, min_tolerance)
+        now = err < tol
+        if np.count_nonzero(now) < min_points or not now[-1]:
+            return None, None
+        if np.array_equal(now, inliers):
+            break
+        inliers = now
+    return H, inliers
+
+
+def apply_h(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Map plane points (N, 2) by the homography."""
+    p = np.column_stack([xy[:, 0], xy[:, 1], np.ones(len(xy))]) @ H.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def h_jacobian(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Local linear map (N, 2, 2) of the homography at plane points (pixels per metre)."""
+    p = np.column_stack([xy[:, 0], xy[:, 1], np.ones(len(xy))]) @ H.T
+    w = p[:, 2]
+    u, v = p[:, 0] / w, p[:, 1] / w
+    J = np.empty((len(xy), 2, 2))
+    J[:, 0, 0] = H[0, 0] - u * H[2, 0]
+    J[:, 0, 1] = H[0, 1] - u * H[2, 1]
+    J[:, 1, 0] = H[1, 0] - v * H[2, 0]
+    J[:, 1, 1] = H[1, 1] - v * H[2, 1]
+    return J / w[:, None, None]
+
+
+def h_scale(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Local image scale (pixels per metre, geometric mean of the axes) at plane points."""
+    J = h_jacobian(H, xy)
+    return np.sqrt(np.abs(J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]))
+
+
+def rotation_about_z(angle: float) -> np.ndarray:
+    """
+    Plane map taking final model coordinates to slot-ordered ones.
+
+    Slot ``k`` holds point ``k - point1_slot + 1``; slot coordinates are the
+    final ones turned clockwise (seen from the front) by ``point1_slot``
+    steps of 45 degrees.
+    """
+    c, s = math.cos(angle), math.sin(angle)
+    # Clockwise by `angle` in a frame with y up: (x, y) -> (x c + y s, -x s + y c).
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def wrap(a):
+    """Angle(s) wrapped to [-pi, pi)."""
+    return (a + np.pi) % (2 * np.pi) - np.pi

@@ -1,0 +1,234 @@
+"""
+Order and code: which slot is point 1, which ink every dot is, and whether it is a mirror.
+
+Each dot's colour is its per-channel darkness in linear light against the
+card's own white (1 - colour / white), which cancels the light's colour.
+Blur mixes a dot with paper, which scales the darkness but keeps its
+direction, so dots are compared by direction. The four inks' directions
+are known from the configuration; the camera's own colour response (channel
+gains, and the overlap of its colour filters that makes colours greyer) is
+fitted to the ring's dots, and every ink seen on the ring is then
+represented by its own dots. Every dot takes the nearest ink; both rings
+must agree, and each slot (its dots of both rings together) and the centre
+must be clearly nearer to their ink than to the next: a margin measured as
+a fraction of the way from the midpoint between the two inks to the
+nearest one. Point 1 is the one black slot; black must also be as dark as
+ink (a grey object is not). A card whose colours are unclear is rejected,
+never guessed.
+
+A mirror shows the ring in the other order, which reads as another valid
+code; the handedness marks (:class:`~pattern_locator.card.pattern.HandednessMark`)
+are where the card's marks must be dark and their mirror images paper.
+"""
+
+from dataclasses import dataclass
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .centres import SpotMeasures
+from .detector_params import DetectorParams
+from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
+from ..errors import CodeError
+
+LETTERS = 'KRGB'
+# Crosstalk values tried when fitting the camera's colour response.
+_CROSSTALK = np.linspace(0.0, 0.45, 7)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """The colours read from one card."""
+
+    point1_slot: int
+    code: Code
+    margin: float                   # the smallest colour margin, 0..1
+    ring_codes: Tuple[str, ...]     # per ring, the colours read ('?' = not seen)
+    not_dots: Tuple[int, ...] = ()  # rows that were grey objects, not ink
+
+
+def ink_darkness(config: PatternConfig) -> np.ndarray:
+    """(4, 3) linear darkness (BGR) of the inks K, R, G, B against the paper."""
+    return np.array([1.0 - srgb_to_linear(np.array(config.colour_rgb(c))[::-1])
+                     for c in LETTERS])
+
+
+def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: PatternConfig,
+              params: DetectorParams, white: Optional[np.ndarray] = None) -> Optional[Reading]:
+    """
+    Read the code from dot colours in slot order (row 0 the centre, then ring r slot k).
+
+    ``colour`` holds each dot's per-channel darkness (:class:`SpotMeasures`
+    ``colour``); ``valid`` which dots were measured; ``white`` the card's
+    paper as the camera gave it (BGR), whose colour is the light's. None
+    when unsure.
+    """
+    n_ring_dots = n_rings * RING_POINTS
+    colour = np.asarray(colour, dtype=float)
+    ring_valid = valid[1:1 + n_ring_dots].reshape(n_rings, RING_POINTS)
+    if not valid[0] or not np.all(ring_valid.any(axis=0)):
+        return None             # the centre or a whole slot unseen: the code is unknown
+    darkness = np.where(valid[:, None], colour, np.nan)
+    strength = darkness.max(axis=1)
+    if np.any(strength[valid] < params.min_darkness):
+        return None
+    ring_rows = 1 + np.flatnonzero(ring_valid.ravel())
+    # The camera's response, fitted to the ring's dots, is undone on every
+    # dot; inks seen on the ring are then represented by their own dots.
+    light = np.ones(3)
+    if white is not None and np.size(white) == 3:
+        light = srgb_to_linear(np.clip(np.asarray(white, dtype=float), 1.0, 255.0))
+        light = light / light.mean()
+    response = _fit_response(darkness[ring_rows], ink_darkness(config), light)
+    seen = response.correct(darkness)
+    unit = seen / np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-9)
+    refs = response.inks.copy()
+    first = _classify(unit[ring_rows], refs)[0]
+    for c in range(4):
+        members = ring_rows[first == c]
+        if len(members):
+            mean = unit[members].mean(axis=0)
+            refs[c] = mean / np.linalg.norm(mean)
+    letter, margin = _classify(unit, refs)
+    rows = 1 + np.arange(n_ring_dots).reshape(n_rings, RING_POINTS)
+    # Black is as dark as ink in every channel, as dark as the ring's coloured
+    # dots are in their darkest channel: a grey object over a dot is no dot.
+    coloured = ring_valid & (letter[rows] > 0)
+    ink = float(np.median(strength[rows[coloured]])) if np.any(coloured) else 0.0
+    grey = ring_valid & (letter[rows] == 0) & (np.mean(colour[rows], axis=2) < 0.7 * ink)
+    ring_valid = ring_valid & ~grey
+    if not np.all(ring_valid.any(axis=0)):
+        return None
+    slot_letter = np.where(ring_valid, letter[rows], -1)
+    agreed = slot_letter.max(axis=0)
+    if np.any(ring_valid & (slot_letter != agreed[None, :])):
+        return None             # the rings disagree: never guess
+    black = np.flatnonzero(agreed == 0)
+    if len(black) != 1:
+        return None
+    point1 = int(black[0])
+    # Each slot decided on the evidence of both rings: their dots' colour
+    # directions averaged (a dot alone is noisier), with a margin.
+    slot_unit = np.where(ring_valid[:, :, None], unit[rows], 0.0).sum(axis=0)
+    slot_unit /= np.linalg.norm(slot_unit, axis=1, keepdims=True)
+    slot_pick, slot_margin = _classify(slot_unit, refs)
+    if np.any(slot_pick != agreed):
+        return None
+    margins = np.append(slot_margin, margin[0])
+    if np.any(margins < params.min_colour_margin):
+        return None
+    k_rows = rows[:, point1][ring_valid[:, point1]]
+    k_dark = float(np.mean(darkness[k_rows]))
+    centre = int(letter[0])
+    if centre == 0 and float(np.mean(darkness[0])) < 0.8 * k_dark:
+        return None
+    slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
+    text = LETTERS[centre] + '-' + 'K' + ''.join(LETTERS[agreed[k]] for k in slots[1:])
+    try:
+        code = Code.parse(text)
+    except CodeError:
+        return None
+    ring_codes = tuple(''.join(LETTERS[slot_letter[r, k]] if slot_letter[r, k] >= 0 else '?'
+                               for k in slots) for r in range(n_rings))
+    return Reading(point1, code, float(np.min(margins)), ring_codes,
+                   tuple(int(r) for r in rows[grey]))
+
+
+def _classify(unit: np.ndarray, refs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """
+    Nearest ink of each unit vector and its margin.
+
+    The margin is how far past the bisector between the nearest ink and the
+    next the dot lies, as a fraction of the way to the nearest ink: 1 on
+    the ink, 0 on the bisector.
+    """
+    angle = np.arccos(np.clip(unit @ refs.T, -1.0, 1.0))         # (N, 4)
+    order = np.argsort(angle, axis=1)
+    best, second = order[:, 0], order[:, 1]
+    rows = np.arange(len(unit))
+    between = np.arccos(np.clip(np.sum(refs[best] * refs[second], axis=1), -1.0, 1.0))
+    margin = (angle[rows, second] - angle[rows, best]) / np.maximum(between, 1e-9)
+    return best, margin
+
+
+@dataclass(frozen=True)
+class _Response:
+    """How this camera, light and card white turned the inks' darkness into the measured one."""
+
+    white_error: np.ndarray     # (3,) per channel: true white / the white used, ^ gamma
+    inks: np.ndarray            # (4, 3) unit directions of K, R, G, B as the sensor mixes them
+
+    def correct(self, darkness: np.ndarray) -> np.ndarray:
+        """Measured darkness (N, 3) -> darkness against the true white (blur left in)."""
+        return 1.0 - (1.0 - darkness) / self.white_error[None, :]
+
+
+def _fit_response(darkness: np.ndarray, inks: np.ndarray,
+                  light: np.ndarray = np.ones(3)) -> _Response:
+    """
+    Fit the camera's colour response to the ring's dots (darkness (N, 3), linear).
+
+    Blur mixes a dot with paper: darkness ``a * d`` for the ink's ``d``. The
+    sensor's colour filters overlap: each channel sees ``1 - t`` of its own
+    light and ``t / 2`` of each other's, ``d -> M(t) d``, each weighted by
+    the light's colour (``light``, the paper's linear BGR) since the overlap
+    comes before white balance. And the card's
+    white, measured on the paper, may be off in a channel by a factor
+    (clipped by a strong light in that channel, or lit unevenly): then the
+    measured darkness is ``1 - w (1 - a M(t) d)``, which takes much of a
+    light channel's darkness away (a blue dot's blue under blue light).
+    For each ``t`` on a grid, the dots are given their nearest ink, and
+    ``a`` per dot and ``w`` per channel are fitted by alternating least
+    squares; the ``t`` that explains the dots best wins.
+    """
+    lit = 1.0 - darkness                                         # (N, 3)
+    t = _CROSSTALK[:, None, None]                                # all t at once: (T, 1, 1)
+    mix = t / 2.0 + np.eye(3)[None] * (1.0 - 1.5 * t)            # (T, 3, 3)
+    # The overlap happens before white balance: a channel takes in its
+    # neighbours' light in proportion to how much of it there is. The
+    # paper's colour as seen has been through the overlap too: undo it.
+    seen_light = np.broadcast_to(light, (len(mix), 3))[..., None]
+    lights = np.clip(np.linalg.solve(mix, seen_light)[..., 0], 0.05 * light.max(), None)  # (T, 3)
+    mix = mix * lights[:, None, :]
+    mix /= mix.sum(axis=2, keepdims=True)
+    mixed = np.einsum('kc,tdc->tkd', inks, mix)                  # (T, 4, 3)
+    unit_inks = mixed / np.linalg.norm(mixed, axis=2, keepdims=True)
+    w = np.ones((len(_CROSSTALK), 1, 3))
+    rows = np.arange(len(_CROSSTALK))[:, None]
+    for step in range(2):
+        seen = 1.0 - lit[None] / w                             # (T, N, 3)
+        unit = seen / np.maximum(np.linalg.norm(seen, axis=2, keepdims=True), 1e-9)
+        nearest = np.argmax(np.einsum('tnc,tkc->tnk', unit, unit_inks), axis=2)    # (T, N)
+        p = mixed[rows, nearest]                                 # (T, N, 3)
+        # The white's error needs three inks on the ring to be told from the
+        # inks' own colours (a ring of one colour and black cannot).
+        free = np.array([len(set(row)) >= 3 for row in nearest.tolist()])[:, None, None]
+        for _ in range(2):
+            # a per dot, given w: 1 - light / w = a p.
+            a = np.clip(np.sum(p * seen, axis=2) / np.sum(p * p, axis=2), 0.05, 1.2)
+            # w per channel, given a: light = w (1 - a p).
+            q = 1.0 - a[..., None] * p
+            fitted = np.clip(np.sum(lit[None] * q, axis=1, keepdims=True)
+                             / np.maximum(np.sum(q * q, axis=1, keepdims=True), 1e-9), 0.5, 3.0)
+            w = np.where(free, fitted, 1.0)
+            seen = 1.0 - lit[None] / w
+    err = np.sum((lit[None] - w * (1.0 - a[..., None] * p)) ** 2, axis=(1, 2))
+    best = int(np.argmin(err))
+    return _Response(w[best, 0], unit_inks[best])
+
+
+def handedness(marks: SpotMeasures, black_peak: float) -> str:
+    """
+    ``'ok'``, ``'mirror'`` or ``'unsure'`` from the marks and their mirror images.
+
+    ``marks`` holds the m marks then their m mirror images. A position shows
+    a mark when it holds a dark, isolated, dot-sized spot at least half as
+    dark as point 1 where the mark belongs. A mark where one belongs and
+    none at any mirror image says the card is seen directly; the reverse
+    says a mirror. An object over some of these places only hides them.
+    """
+    m = len(marks.valid) // 2
+    present = marks.valid & (marks.peak >= 0.5 * black_peak)
+    if np.any(present[m:]):
+        return 'unsure' if np.any(present[:m]) else 'mirror'
+    return 'ok' if np.any(present[:m]) else 'unsure'

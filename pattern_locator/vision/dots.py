@@ -1,0 +1,292 @@
+"""
+Dots: dark blobs against the local white, found in time linear in the pixels.
+
+Every dot, black or coloured, is dark in at least one channel against the
+white card whatever the light's colour, so the per-pixel minimum over B, G, R
+is compared with the local white: a max filter on a decimated image. A pixel
+belongs to a dot when it is darker than a fraction of that white *and*
+darker by several times the local noise, so fine texture (carpet, gravel,
+foliage) and the sensor noise of a dark frame do not make thousands of blobs.
+The noise is the mean high-pass amplitude, taken where it is lowest nearby:
+on a card that is the paper between the dots, in a textured area the texture.
+
+The image is segmented once, decimated by two (as AprilTag does), into
+connected components. A far card's small dots are segmented again at full
+resolution in a window round its centre (:meth:`DotImage.blobs_in`).
+
+An interlaced frame grabbed while the camera moved shows a comb: its two
+fields were exposed a field apart. ``field='auto'`` notices the comb and
+then uses one field, interpolating the other rows.
+"""
+
+from dataclasses import dataclass, field as dataclass_field
+from typing import Optional, Tuple
+
+import cv2
+import numpy as np
+
+from .detector_params import DetectorParams
+from ..errors import ImageError
+
+# High-pass amplitude (|x - 3x3 mean|, averaged) of Gaussian noise, per sigma.
+_HIGHPASS_PER_SIGMA = 0.75
+
+
+@dataclass(frozen=True)
+class Blobs:
+    """
+    Connected components of a dot mask, in full-resolution pixel coordinates.
+
+    ``labels`` is the label image they come from, one label pixel covering
+    ``scale`` x ``scale`` image pixels from ``origin`` (x, y); ``box`` is
+    (x, y, w, h) in label pixels and ``label`` each component's label.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    area: np.ndarray        # image pixels
+    box: np.ndarray
+    label: np.ndarray
+    labels: np.ndarray
+    scale: int
+    origin: Tuple[int, int]
+
+    def __len__(self) -> int:
+        return len(self.u)
+
+    def covariance(self, j: int) -> np.ndarray:
+        """Second central moments (image pixels^2) of component ``j``."""
+        x, y, w, h = (int(c) for c in self.box[j])
+        m = cv2.moments((self.labels[y:y + h, x:x + w] == self.label[j]).view(np.uint8),
+                        binaryImage=True)
+        a = max(m['m00'], 1.0)
+        s2 = float(self.scale * self.scale)
+        return s2 * np.array([[m['mu20'] / a + 1 / 12, m['mu11'] / a],
+                              [m['mu11'] / a, m['mu02'] / a + 1 / 12]])
+
+    def extent(self, j: int) -> float:
+        """Half the longer side of component ``j``'s box, image pixels."""
+        return 0.5 * self.scale * float(max(self.box[j, 2], self.box[j, 3]))
+
+
+@dataclass(frozen=True)
+class DotImage:
+    """One image's segmentation and what later stages measure against."""
+
+    image: np.ndarray           # BGR (or grey) uint8; one field interpolated if `field`
+    grey_only: bool
+    blobs: Blobs                # the decimated segmentation
+    white: np.ndarray           # local white (darkest channel) on a grid, float32
+    noise: np.ndarray           # local noise sigma of the darkest channel, same grid
+    grid_step: int              # image pixels per grid cell
+    field: Optional[str]        # 'even' or 'odd' when one field was used
+    params: DetectorParams
+    small: np.ndarray           # the image decimated by `scale` (area average)
+    scale: int
+    _cache: dict = dataclass_field(default_factory=dict, repr=False, compare=False)
+
+    def _grid(self, table: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        gx = np.clip((np.asarray(u, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
+                     0, table.shape[1] - 1)
+        gy = np.clip((np.asarray(v, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
+                     0, table.shape[0] - 1)
+        x0 = np.minimum(gx.astype(np.intp), table.shape[1] - 2) if table.shape[1] > 1 else \
+            np.zeros_like(gx, dtype=np.intp)
+        y0 = np.minimum(gy.astype(np.intp), table.shape[0] - 2) if table.shape[0] > 1 else \
+            np.zeros_like(gy, dtype=np.intp)
+        fx = np.clip(gx - x0, 0.0, 1.0)
+        fy = np.clip(gy - y0, 0.0, 1.0)
+        x1 = np.minimum(x0 + 1, table.shape[1] - 1)
+        y1 = np.minimum(y0 + 1, table.shape[0] - 1)
+        return ((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
+                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+
+    def _full_threshold(self) -> np.ndarray:
+        """Return the dot threshold at full resolution (made once, when first needed)."""
+        cached = self._cache.get('threshold')
+        if cached is None:
+            h, w = self.image.shape[:2]
+            # The same margin as the decimated segmentation: its noise is the
+            # full resolution's only for white noise, and real noise (JPEG,
+            # defocused sensor noise) is seldom white.
+            small = _threshold(self.white, self.noise / self.scale, self.params)
+            cached = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+            self._cache['threshold'] = cached
+        return cached
+
+    def white_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Local white of the darkest channel at image points (bilinear on the grid)."""
+        return self._grid(self.white, u, v)
+
+    def noise_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Noise sigma of the darkest channel at full resolution, at image points."""
+        return self._grid(self.noise, u, v)
+
+    def darkest(self, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+        """Darkest channel of the image at integer pixels (any array shape)."""
+        pixels = self.image[ys, xs]
+        return pixels if self.grey_only else pixels.min(axis=-1)
+
+    def blobs_in(self, x0: int, y0: int, x1: int, y1: int) -> Blobs:
+        """Segment the window [x0, x1) x [y0, y1) again at full resolution."""
+        h, w = self.image.shape[:2]
+        x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+        roi = self.image[y0:y1, x0:x1]
+        darkest = roi if self.grey_only else _min_channel(np.ascontiguousarray(roi))
+        mask = cv2.compare(darkest, self._full_threshold()[y0:y1, x0:x1], cv2.CMP_LT)
+        # Components cut by the window's edge are dropped: not whole dots.
+        return _components(mask, 1, (x0, y0), self.params.max_dot_area_fraction * h * w)
+
+
+def check_image(image: np.ndarray) -> np.ndarray:
+    """Return ``image`` as contiguous BGR or grey uint8; ImageError naming what is wrong."""
+    if not isinstance(image, np.ndarray):
+        raise ImageError(f'image must be a numpy array, got {type(image).__name__}')
+    if image.dtype != np.uint8:
+        raise ImageError(f'image must be 8-bit (uint8), got {image.dtype}')
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = image[:, :, :3]
+    if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 3)):
+        raise ImageError(f'image must be HxW grey or HxWx3 BGR, got shape {image.shape}')
+    if image.shape[0] < 16 or image.shape[1] < 16:
+        raise ImageError(f'image too small: {image.shape[1]}x{image.shape[0]}')
+    return np.ascontiguousarray(image)
+
+
+def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
+    """Segment a checked image (see :func:`check_image`) into dots."""
+    field = params.field
+    if field == 'auto':
+        field = 'even' if combed(image) else 'frame'
+    if field in ('even', 'odd'):
+        image = one_field(image, field)
+    grey = image.ndim == 2
+    h, w = image.shape[:2]
+    s = params.decimate if min(h, w) >= 48 * params.decimate else 1
+    if s == 2:
+        h2, w2 = h // 2, w // 2
+        view = image[:2 * h2, :2 * w2]
+        small = cv2.resize(view if view.flags['C_CONTIGUOUS'] else np.ascontiguousarray(view),
+                           (w2, h2), interpolation=cv2.INTER_AREA)
+    else:
+        small = image
+    coarse = small if grey else _min_channel(small)
+    # Local white and noise on a grid four times coarser.
+    ch, cw = coarse.shape
+    gh, gw = max(1, ch // 4), max(1, cw // 4)
+    grid = cv2.resize(coarse, (gw, gh), interpolation=cv2.INTER_AREA)
+    step = 4 * s
+    k = max(3, int(params.white_window // step) | 1)
+    white = cv2.dilate(grid, cv2.getStructuringElement(cv2.MORPH_RECT, (k, k)))
+    white = cv2.blur(white, (3, 3)).astype(np.float32)
+    highpass = cv2.absdiff(coarse, cv2.blur(coarse, (3, 3)))
+    noise = cv2.resize(highpass, (gw, gh), interpolation=cv2.INTER_AREA).astype(np.float32)
+    # The quietest place nearby: the paper of a card, the texture of a carpet.
+    noise = cv2.erode(noise, np.ones((5, 5), np.uint8)) / _HIGHPASS_PER_SIGMA
+    # Coarse-image noise to full-resolution noise (decimation averages s*s pixels).
+    noise *= s
+    threshold = _threshold(white, noise / s, params)
+    threshold = cv2.resize(threshold, (cw, ch), interpolation=cv2.INTER_LINEAR)
+    mask = cv2.compare(coarse, threshold, cv2.CMP_LT)
+    blobs = _components(mask, s, (0, 0), params.max_dot_area_fraction * h * w / (s * s))
+    return DotImage(image, grey, blobs, white, noise, step,
+                    field if field in ('even', 'odd') else None, params, small, s)
+
+
+def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> np.ndarray:
+    """Grey level below which a pixel is dot, from the local white and noise."""
+    white = np.asarray(white, dtype=np.float32)
+    # Ink is at least half as dark as the paper is bright, whatever the
+    # noise: a card next to a busy scene (where the noise is measured) keeps
+    # its dots.
+    margin = np.maximum((1.0 - params.dark_ratio) * white,
+                        np.minimum(params.noise_factor * noise, 0.5 * white))
+    margin = np.maximum(margin, 2.0)
+    threshold = np.where(white >= params.min_white, white - margin, 0.0)
+    return np.clip(threshold, 0, 255).astype(np.uint8)
+
+
+def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
+                max_area: float) -> Blobs:
+    """Label a mask's components that could be dots (round, whole, at most max_area)."""
+    # Grana's block-based labelling is about twice as fast as the default here.
+    n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
+    h, w = mask.shape
+    area = stats[:, cv2.CC_STAT_AREA]
+    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
+    # Round dots fill a good part of their box and are not long and thin (a
+    # 75-degree tilt makes a dot about 4:1); a dot cut by the border has a
+    # false centre.
+    keep = ((area <= max_area) & (area * 4 >= bw * bh)
+            & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
+            & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
+    keep[0] = False
+    idx = np.flatnonzero(keep)
+    s = float(scale)
+    u = origin[0] + s * (centroids[idx, 0] + 0.5) - 0.5
+    v = origin[1] + s * (centroids[idx, 1] + 0.5) - 0.5
+    return Blobs(u, v, area[idx].astype(float) * s * s, stats[idx, :4].copy(),
+                 idx.astype(np.int32), labels, scale, origin)
+
+
+def _min_channel(image: np.ndarray) -> np.ndarray:
+    """Per-pixel minimum over B, G, R: an erosion along the interleaved row."""
+    h, w = image.shape[:2]
+    rows = cv2.erode(image.reshape(h, w * 3), np.ones((1, 3), np.uint8))
+    return np.ascontiguousarray(rows[:, 1::3])
+
+
+def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
+    """
+    Tell whether the image is an interlaced frame whose two fields disagree.
+
+    In a progressive image a row is closer to its neighbours than to the rows
+    two away (or as close, in noise); when the camera moved between the
+    fields, the rows of one field disagree with the other field's in every
+    moving area: the curvature over one row exceeds that over two, by far.
+    Measured on every sixteenth column, in tiles, so that one small card
+    moving against a still background is enough.
+    """
+    g = image[:, ::16, 1] if image.ndim == 3 else image[:, ::16]
+    g = g.astype(np.int16)
+    h = (g.shape[0] - 4) // 2 * 2
+    if h < 2 * tile_rows:
+        return False
+    mid = g[2:2 + h]
+    one = np.abs(2 * mid - g[1:1 + h] - g[3:3 + h])
+    two = np.abs(2 * mid - g[0:h] - g[4:4 + h])
+    rows = h // tile_rows * tile_rows
+    cols = one.shape[1] // 4 * 4
+    if cols == 0:
+        return False
+    t1 = one[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
+    t2 = two[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
+    pixels = tile_rows * 4
+    # A tile counts when its one-row curvature is strong (6 levels a pixel on
+    # average) and three times its two-row curvature.
+    strong = (t1 > 6 * pixels) & (t1 > 3 * t2)
+    return int(np.count_nonzero(strong)) >= 2
+
+
+def one_field(image: np.ndarray, field: str) -> np.ndarray:
+    """Keep the ``even`` or ``odd`` rows of a frame, interpolating the other rows between them."""
+    h = image.shape[0]
+    first = 0 if field == 'even' else 1
+    rows = np.ascontiguousarray(image[first::2])
+    out = np.empty_like(image)
+    out[first::2] = rows
+    if len(rows) > 1:
+        between = cv2.addWeighted(rows[:-1], 0.5, rows[1:], 0.5, 0.0)
+        out[first + 1:first + 1 + 2 * len(between):2] = between
+    # The row beyond the last (or before the first) kept row copies its neighbour.
+    if first == 0 and h % 2 == 0:
+        out[h - 1] = rows[-1]
+    if first == 1:
+        out[0] = rows[0]
+        if h % 2 == 1:
+            out[h - 1] = rows[-1]
+    return out

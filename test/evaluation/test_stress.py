@@ -1,0 +1,77 @@
+"""The stress benchmark's machinery on a few frames (nothing here is timed)."""
+
+import numpy as np
+from pattern_locator.card.pattern import load_pattern_config
+from pattern_locator.cli import main
+from pattern_locator.evaluation import stress
+from pattern_locator.evaluation.bench import bench_cameras
+import pytest
+
+CONFIG = load_pattern_config()
+
+
+def test_every_condition_of_the_issue_is_a_row():
+    names = set(stress.CONDITIONS)
+    for needed in ('textures', 'dark noisy', 'photos', 'chromatic', 'mirror', 'dim', 'blur',
+                   'occlusion', 'interlace', 'far'):
+        assert needed in names
+    lights = [n for n in stress.CONDITIONS if n.startswith('light ')]
+    assert len(lights) >= 13 and {'light magenta', 'light red wall'} <= set(lights)
+    gains = np.array([g for _, g in stress.LIGHTS])
+    assert gains.min() >= 0.7 and gains.max() <= 1.4
+
+
+def test_frames_are_seeded_and_fit_their_condition():
+    frames = stress.make_frames(CONFIG, 2, 3, ['far', 'mirror', 'interlace', 'light magenta'])
+    again = stress.make_frames(CONFIG, 2, 3, ['far', 'mirror', 'interlace', 'light magenta'])
+    assert frames == again
+    assert len(frames) == 4 * 2 * len(bench_cameras())
+    for f in frames:
+        if f.condition == 'far':
+            assert 5.5 <= f.distance <= 8.0
+        else:
+            assert 1.25 <= f.distance <= 4.0
+        assert f.expected == (f.condition != 'mirror')
+        if f.condition == 'interlace':
+            assert 2.0 <= abs(f.options.interlace_shift_px) <= 10.0
+            assert f.options.jpeg_quality is None
+
+
+@pytest.fixture(scope='module')
+def rows():
+    frames = [f for f in stress.make_frames(CONFIG, 1, 2, ['plain', 'mirror'])
+              if f.camera_name.startswith('640')]
+    return stress.run_frames(frames, CONFIG, progress=False)
+
+
+def test_rows_count_right_and_wrong_ids_and_memory(rows):
+    assert list(rows) == ['plain', 'mirror']
+    plain, mirror = rows['plain'], rows['mirror']
+    assert plain.dots[0].found and plain.dots[0].wrong_ids == 0
+    assert plain.april[0].found
+    assert sum(r.wrong_ids for r in mirror.dots) == 0 and not mirror.dots[0].found
+    for row in rows.values():
+        for r in row.dots + row.april:
+            assert r.time_ms > 0
+            assert np.isnan(r.peak_mb) or 0 <= r.peak_mb < 500
+
+
+def test_tables_show_every_row_and_the_targets(rows):
+    table = stress.stress_table(rows)
+    for name in ('plain', 'mirror', 'all conditions', 'det %', 'p99', 'MB'):
+        assert name in table
+    targets = stress.targets_table(rows)
+    assert '0 wrong ids in every condition' in targets and 'met' in targets
+
+
+def test_peak_extra_memory_sees_a_native_allocation():
+    stress.exact_memory_accounting()
+    peak = stress.peak_extra_mb(lambda: np.ones(10_000_000).sum())     # 80 MB
+    assert np.isnan(peak) or 70 <= peak <= 200
+
+
+def test_bench_options_that_conflict_are_refused_in_one_line(capsys):
+    assert main(['bench', '--stress', '--node']) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and '--stress' in err[0] and '--node' in err[0]
+    assert main(['bench', '--scenes', '0']) == 2

@@ -1,7 +1,7 @@
 """
 The tracking loop's odometry feed-forward: the card stays centred while the base turns.
 
-A simulated loop in simulated time (1 ms steps, nothing timed): a base
+A simulated loop in simulated time (2 ms steps, nothing timed): a base
 driving a route of ``sim.drive`` (turns at up to 0.5 rad/s, the issue's
 limit), its odometry with the floor sim's errors (2 % scale, a gyro bias,
 noise) at 50 Hz, the EVI-D31 head running the commanded speed steps after a
@@ -24,11 +24,12 @@ DEG = math.pi / 180.0
 # The card's centre above the pan axis (a card at 2.15 m, the camera at 1.1 m).
 CARD_HEIGHT_M = 1.05
 FOV_HALF = (24.0 * DEG, 18.0 * DEG)
+STEP_MS = 2
 
 
 @dataclass
 class Run:
-    """Per-millisecond truth of one run: time, the base's yaw rate, the card's off-axis angle."""
+    """The truth every step of one run: time, the base's yaw rate, the card's off-axis angle."""
 
     times: List[float]
     yaw_rates: List[float]
@@ -81,10 +82,11 @@ def drive(route: DriveRoute, card_xy: Tuple[float, float], feed_forward: bool,
     run = Run([], [], [], [])
     # Odometry errors as the floor sim's defaults: scale, gyro bias, noise.
     scale, bias, speed_noise, rate_noise = 0.02, 0.002, 0.01, 0.005
-    phases = [rng.randrange(100) for _ in range(3)]
+    # Every event on the 2 ms grid.
+    phases = [2 * rng.randrange(50) for _ in range(3)]
     duration_ms = int(route.duration_s * 1000.0)
     mode = ''
-    for ms in range(duration_ms):
+    for ms in range(0, duration_ms, STEP_MS):
         t = ms / 1000.0
         for item in sorted(p for p in pending if p[0] <= ms):
             pending.remove(item)
@@ -98,11 +100,12 @@ def drive(route: DriveRoute, card_xy: Tuple[float, float], feed_forward: bool,
             else:
                 ctrl.on_odometry(*payload)
         # The head: commanded speeds reached at 300 deg/s^2, stopped at its travel.
-        dv = 300 * DEG * 0.001
+        dt = STEP_MS / 1000.0
+        dv = 300 * DEG * dt
         v_pan += min(max(want[0] - v_pan, -dv), dv)
         v_tilt += min(max(want[1] - v_tilt, -dv), dv)
-        pan = min(max(pan + v_pan * 0.001, -100 * DEG), 100 * DEG)
-        tilt = min(max(tilt + v_tilt * 0.001, -25 * DEG), 25 * DEG)
+        pan = min(max(pan + v_pan * dt, -100 * DEG), 100 * DEG)
+        tilt = min(max(tilt + v_tilt * dt, -25 * DEG), 25 * DEG)
         state = route.state_at(t)
         bearing, elevation, distance = card_direction(state, card_xy)
         run.times.append(t)
@@ -114,15 +117,15 @@ def drive(route: DriveRoute, card_xy: Tuple[float, float], feed_forward: bool,
             yaw_odom += rate * 0.02
             speed = (1.0 + scale) * state.speed_m_s + (
                 rng.gauss(0.0, speed_noise) if state.speed_m_s > 0 else 0.0)
-            pending.append((ms + rng.randrange(2, 15), 3, (t, yaw_odom, speed, 0.0, rate)))
+            pending.append((ms + rng.randrange(2, 16, 2), 3, (t, yaw_odom, speed, 0.0, rate)))
         if ms % 100 == phases[1]:
             # VISCA position units: 8.8 per degree pan, 12 tilt; stamped when read.
             reading = (round(pan / DEG * 8.8) / 8.8 * DEG, round(tilt / DEG * 12) / 12 * DEG)
-            pending.append((ms + 15, 1, (t,) + reading))
+            pending.append((ms + 16, 1, (t,) + reading))
         if ms % 100 == phases[2]:
             e_pan, e_tilt = bearing - pan, elevation - tilt
             if abs(e_pan) < FOV_HALF[0] and abs(e_tilt) < FOV_HALF[1]:
-                arrive = ms + rng.randrange(60, 101)
+                arrive = ms + rng.randrange(60, 102, 2)
                 pending.append((arrive, 2, (t, e_pan + rng.gauss(0.0, 0.03 * DEG),
                                             e_tilt + rng.gauss(0.0, 0.03 * DEG), 100.0,
                                             distance if with_distance else None)))
@@ -165,7 +168,7 @@ def test_feed_forward_keeps_the_card_within_2_deg_through_a_turn(name):
     assert with_ff.worst_while_turning(0.5) <= 2.0, with_ff.worst_while_turning(0.5)
     assert without.worst_while_turning(0.5) > with_ff.worst_while_turning(0.5) + 0.5, (
         without.worst_while_turning(0.5), with_ff.worst_while_turning(0.5))
-    assert set(with_ff.modes[1000:]) == {MODE_TRACK}
+    assert set(with_ff.modes[1000 // STEP_MS:]) == {MODE_TRACK}
 
 
 def test_without_the_distance_the_fitted_rate_stands_in_for_the_translation():

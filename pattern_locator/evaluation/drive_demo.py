@@ -36,6 +36,7 @@ import json
 import math
 import os
 from pathlib import Path
+import signal
 import sys
 import tempfile
 import time
@@ -251,6 +252,9 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
     context = Context()
     rclpy.init(context=context)
     observer = DriveObserver(context, setup.namespace, setup.record_odometry)
+    # A SIGTERM (a CI's timeout, kill) ends the drive like Ctrl-C: the node
+    # processes are stopped on the way out instead of being left running.
+    previous = _terminate_as_interrupt()
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(observer.node)
     link = Path(tempfile.mkdtemp(prefix='pattern_locator_drive_')) / 'evi_d31'
@@ -305,6 +309,8 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
             if progress:
                 print(file=sys.stderr)
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         executor.shutdown()
         observer.node.destroy_node()
         rclpy.shutdown(context=context)
@@ -313,6 +319,17 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
         except OSError:
             pass
     return observer
+
+
+def _terminate_as_interrupt():
+    """Make SIGTERM raise KeyboardInterrupt (main thread only); return the old handler."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:         # not the main thread
+        return None
 
 
 def _limits(world: FloorWorld, setup: DriveSetup):

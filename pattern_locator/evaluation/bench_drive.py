@@ -26,7 +26,7 @@ from typing import Dict, Iterator, List, Sequence, Tuple
 
 import numpy as np
 
-from .drive_demo import DriveMetrics, DriveSetup, judge, run_drive
+from .drive_demo import DriveMetrics, DriveSetup, judge, run_drive, write_summary
 from ..sim.floor_file import load_floor_world
 
 
@@ -139,8 +139,11 @@ def run_drive_bench(runs: int = 3, seed: int = 1, route: str = 'loop',
                 name = f'seed {seed + k}{suffix}'
                 setup = DriveSetup(route=route, max_speed_m_s=max_speed_m_s, seed=seed + k,
                                    feed_forward=ff)
-                observer = run_drive(out / name.replace(' ', '_'), setup, progress=True)
+                run_dir = out / name.replace(' ', '_')
+                observer = run_drive(run_dir, setup, progress=True)
                 metrics = judge(observer, world)
+                write_summary(metrics, run_dir / 'drive_summary.json',
+                              {'seed': seed + k, 'feed_forward': ff, 'route': route})
                 results[ff].append(metrics)
                 rows.append(_row(name, metrics))
                 print(f'  {name}: {metrics.located} fixes, coverage '

@@ -96,14 +96,15 @@ class Fix:
     arrival_ns: int
     frame_id: str
     T_frame_base: Pose
-    covariance: np.ndarray
+    covariance: Optional[np.ndarray] = None
     ids: Optional[Tuple[int, int, int]] = None
 
 
 class DriveObserver:
     """A node in this process that records the truth, the fixes and the diagnostics."""
 
-    def __init__(self, context, namespace: str = '', odometry: bool = False) -> None:
+    def __init__(self, context, namespace: str = '', odometry: bool = False,
+                 sim_time: bool = False, building: Optional[BuildingMap] = None) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
         from geometry_msgs.msg import TwistStamped
@@ -113,11 +114,17 @@ class DriveObserver:
         from sensor_msgs.msg import CameraInfo
         from std_msgs.msg import UInt16MultiArray
 
+        from rclpy.parameter import Parameter
+        # With the sim's /clock, a fix's arrival is on that clock too.
         self.node = rclpy.create_node('drive_observer', context=context,
-                                      namespace='/' + namespace.strip('/'))
+                                      namespace='/' + namespace.strip('/'),
+                                      parameter_overrides=[Parameter('use_sim_time',
+                                                                     value=sim_time)])
         self.frames: Dict[int, TruthFrame] = {}
         self.fixes: List[Fix] = []
         self._ids: List[Tuple[int, int, int]] = []
+        self._unpaired: List[Fix] = []
+        self.building: Optional[BuildingMap] = building
         self.cameras: Dict[Tuple[float, ...], Any] = {}
         self.camera_of: Dict[int, Tuple[float, ...]] = {}
         self.sim_status: Dict[str, str] = {}
@@ -134,11 +141,18 @@ class DriveObserver:
             m, speed_m_s=m.twist.linear.x, yaw_rate_rad_s=m.twist.angular.z), 100)
         n.create_subscription(CameraInfo, 'camera/camera_info', self._on_camera_info,
                               qos_profile_sensor_data)
+        # The fixes: robot_location and its ids (both kept 10 deep by the locator, so a
+        # busy observer loses neither), the covariance by stamp (its topic is latched,
+        # kept 1 deep: one can be lost, then that fix has no covariance).
         n.create_subscription(UInt16MultiArray, 'robot_location/ids', self._on_ids, 100)
+        n.create_subscription(PoseStamped, 'robot_location', self._on_fix, 100)
         n.create_subscription(PoseWithCovarianceStamped, 'robot_location/with_covariance',
-                              self._on_fix, QoSProfile(
+                              self._on_covariance, QoSProfile(
                                   depth=100, reliability=ReliabilityPolicy.RELIABLE,
                                   durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        self.covariances: Dict[int, np.ndarray] = {}
+        self.mispaired = 0
+        self._rooms_by_frame = {}
         n.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 50)
         # (stamp ns, T_odom_base, 6x6 pose covariance) of every odometry message, if asked.
         self.odometry: List[Tuple[int, Pose, np.ndarray]] = []
@@ -174,17 +188,38 @@ class DriveObserver:
 
     def _on_fix(self, msg) -> None:
         now = self.node.get_clock().now().nanoseconds
-        cov = np.array(msg.pose.covariance, dtype=float).reshape(6, 6)
         self.fixes.append(Fix(self._key(msg), now, msg.header.frame_id,
-                              pose_from_msg(msg.pose.pose), cov))
+                              pose_from_msg(msg.pose)))
+        self._unpaired.append(self.fixes[-1])
         self._pair()
 
+    def _on_covariance(self, msg) -> None:
+        self.covariances[self._key(msg)] = np.array(msg.pose.covariance,
+                                                    dtype=float).reshape(6, 6)
+
     def _pair(self) -> None:
-        # The locator publishes the ids just before each fix: the n-th ids are
-        # the n-th fix's (both reliable, depth 100, each in its own order).
-        unpaired = [f for f in self.fixes if f.ids is None]
-        while unpaired and self._ids:
-            unpaired.pop(0).ids = self._ids.pop(0)
+        # The locator publishes the ids just before each pose: the n-th ids are the
+        # n-th pose's. A room frame names the room: ids of another room mean a message
+        # was lost on one side, and that pair is not made (counted as mispaired).
+        while self._unpaired and self._ids:
+            fix, ids = self._unpaired.pop(0), self._ids.pop(0)
+            room = self.room_of_frame(fix.frame_id)
+            if room is not None and room != ids[:2]:
+                self.mispaired += 1
+                continue
+            fix.ids = ids
+
+    def room_of_frame(self, frame_id: str) -> Optional[Tuple[int, int]]:
+        """Return (floor, room) of a room frame name of the floor's map (None otherwise)."""
+        if self.building is None:
+            return None
+        if frame_id not in self._rooms_by_frame:
+            try:
+                room = self.building.room_by_frame(frame_id)
+                self._rooms_by_frame[frame_id] = (room.floor, room.room)
+            except Exception:  # noqa: B902 - the building frame or an unknown one
+                self._rooms_by_frame[frame_id] = None
+        return self._rooms_by_frame[frame_id]
 
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
@@ -224,6 +259,7 @@ class DriveSetup:
     timeout_s: float = 0.0            # 0: the route's duration plus a margin
     until_s: float = 0.0              # > 0: stop after this much route time
     camera_init_s: float = 1.0        # the emulated camera's power-up
+    sim_time: bool = False            # the sim publishes /clock, every node runs on it
     record_odometry: bool = False
     namespace: str = ''
     driver_parameters: Tuple[str, ...] = ()
@@ -251,7 +287,9 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
     timeout = setup.timeout_s or duration + 90.0
     context = Context()
     rclpy.init(context=context)
-    observer = DriveObserver(context, setup.namespace, setup.record_odometry)
+    observer = DriveObserver(context, setup.namespace, setup.record_odometry, setup.sim_time,
+                             world.building)
+    sim_time = [] if not setup.sim_time else ['-p', 'use_sim_time:=true']
     # A SIGTERM (a CI's timeout, kill) ends the drive like Ctrl-C: the node
     # processes are stopped on the way out instead of being left running.
     previous = _terminate_as_interrupt()
@@ -268,7 +306,9 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                 f'interlace:={str(setup.interlace).lower()}',
                 f'exposure_s:={float(setup.exposure_s)}',
                 f'frame_rate_hz:={float(setup.frame_rate_hz)}',
-                f'head_mount_pitch_deg:={pitch}'], setup.namespace) as sim, \
+                f'head_mount_pitch_deg:={pitch}',
+                f'publish_clock:={str(setup.sim_time).lower()}'], setup.namespace,
+                sim_time) as sim, \
                 node_process('camera_driver_node', out / 'camera_driver.log', [
                     f'port:={link}', f'zoom_control:={str(setup.zoom_control).lower()}',
                     f'odometry_feed_forward:={str(setup.feed_forward).lower()}',
@@ -277,14 +317,14 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                     # soon, briskly, at the tilt where cards are seen from the corridor.
                     'search_after_s:=1.0', 'search_speed_deg_s:=30.0',
                     'search_tilt_levels_deg:=[10.0, 0.0]',
-                    *setup.driver_parameters], setup.namespace) as driver, \
+                    *setup.driver_parameters], setup.namespace, sim_time) as driver, \
                 node_process('locator_node', out / 'locator.log', [
                     f'building_map:={config_path("floor_building.yaml")}',
                     f'estimator:={setup.estimator}', f'head.mount_pitch_deg:={pitch}',
                     # Cards of a room are seen from the corridor through its door: the
                     # base is then outside the card's room but inside the building.
                     'gates.footprint:=building',
-                    *setup.locator_parameters], setup.namespace) as locator:
+                    *setup.locator_parameters], setup.namespace, sim_time) as locator:
             deadline = time.monotonic() + timeout
             finished_at = None
             shown = -1
@@ -420,7 +460,7 @@ class DriveMetrics:
             'coverage_95': clean(self.coverage_95), 'located': self.located,
             'images': self.images, 'route_s': self.duration_s,
             'fix_coverage_by_stamp': clean(self.fix_coverage_by_stamp),
-            'other_room_fixes': self.other_room,
+            'other_room_fixes': self.other_room, 'unpaired_fixes': self.unpaired,
             'error_driving_m': {k: clean(v) for k, v in
                                 self.error_summary(self.driving).items()},
             'error_stopped_m': {k: clean(v) for k, v in
@@ -503,12 +543,15 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         yaw_rate = truth.yaw_rate_rad_s or 0.0
         moving = abs(truth.speed_m_s or 0.0) > 1e-3 or abs(yaw_rate) > 1e-3
         driving.append(moving)
-        sigma = fix.covariance[:3, :3]
-        try:
-            d2 = float(e @ np.linalg.solve(sigma, e))
-        except np.linalg.LinAlgError:
-            d2 = math.inf
-        inside.append(d2 <= CHI2_3_95)
+        covariance = observer.covariances.get(fix.stamp_ns)
+        d2 = sigma = None
+        if covariance is not None:
+            sigma = covariance[:3, :3]
+            try:
+                d2 = float(e @ np.linalg.solve(sigma, e))
+            except np.linalg.LinAlgError:
+                d2 = math.inf
+            inside.append(d2 <= CHI2_3_95)
         located_xy = (T_building_frame @ fix.T_frame_base).t[:2]
         fix_xy.append(located_xy)
         fix_times.append((fix.stamp_ns - begin) * 1e-9)
@@ -518,16 +561,21 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         r.errors_m.append(error)
         record = {'t_s': round(fix_times[-1], 3), 'room': name, 'ids': fix.ids,
                   'error_m': error, 'error_xyz_m': [float(v) for v in e],
-                  'sigma_xyz_m': [float(math.sqrt(max(v, 0.0))) for v in np.diag(sigma)],
+                  'sigma_xyz_m': None if sigma is None else [
+                      float(math.sqrt(max(v, 0.0))) for v in np.diag(sigma)],
                   'mahalanobis2': d2, 'speed_m_s': truth.speed_m_s,
                   'yaw_rate_rad_s': truth.yaw_rate_rad_s, 'latency_ms': latency[-1]}
         records.append(record)
         if fix.ids is None:
             unpaired += 1
             continue
-        seen = _card_in_view(scene, world, building, truth, fix.ids, observer, fix.stamp_ns)
+        views = _views(scene, building, truth, observer, fix.stamp_ns)
+        seen = views is None or any(v.ids.as_tuple() == tuple(fix.ids) for v in views)
         record['card_in_view'] = seen
         if not seen:
+            # What the image held instead, for whoever looks into it.
+            record['views'] = [(v.ids.as_tuple(), v.dots_visible, round(v.distance_m, 2))
+                               for v in views]
             wrong += 1
             r.wrong_ids += 1
             wrong_xy.append(located_xy)
@@ -578,7 +626,7 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         handovers_s=np.array(handovers), off_axis_deg=np.array(off_axis),
         off_axis_turning_deg=np.array(turning), rooms=order,
         visca=_visca(observer.driver_diagnostics), latency_ms=np.array(latency),
-        unpaired=unpaired, track_time_s=(grid - begin) * 1e-9, fix_age_s=ages,
+        unpaired=unpaired + observer.mispaired, track_time_s=(grid - begin) * 1e-9, fix_age_s=ages,
         true_xy=true_xy, fix_xy=np.array(fix_xy).reshape(-1, 2),
         wrong_xy=np.array(wrong_xy).reshape(-1, 2), fix_time_s=np.array(fix_times),
         records=records)
@@ -615,21 +663,19 @@ def _coverage(grid: np.ndarray, stamps: np.ndarray, arrivals: np.ndarray
     return covered, covered_stamp, ages
 
 
-def _card_in_view(scene: FloorScene, world: FloorWorld, building: BuildingMap,
-                  truth: TruthFrame, ids: Tuple[int, int, int], observer: DriveObserver,
-                  stamp: int) -> bool:
-    """Return whether the card ``ids`` was in the image of ``stamp`` (some of its dots)."""
+def _views(scene: FloorScene, building: BuildingMap, truth: TruthFrame,
+           observer: DriveObserver, stamp: int) -> Optional[list]:
+    """Return the cards (some of their dots) in the image of ``stamp``; None: not known."""
     if truth.T_room_camera is None:
-        return True      # not judged: the truth of the camera was lost
+        return None      # not judged: the truth of the camera was lost
     T_building_frame = _frame_pose(building, truth.camera_frame_id)
     key = observer.camera_of.get(stamp)
     camera = observer.cameras.get(key) if key is not None else None
     if camera is None and observer.cameras:
         camera = next(iter(observer.cameras.values()))
     if T_building_frame is None or camera is None:
-        return True
-    T_building_camera = T_building_frame @ truth.T_room_camera
-    return any(v.ids.as_tuple() == tuple(ids) for v in scene.views(T_building_camera, camera))
+        return None
+    return scene.views(T_building_frame @ truth.T_room_camera, camera)
 
 
 def _handovers(fixes: Sequence[Fix]) -> List[float]:

@@ -379,6 +379,11 @@ class CameraDriverNode(Node):
         if not all_finite(values + (reading.stamp_s,)):
             self.problems.report('reading', f'head reading not finite: {values}')
             return
+        if reading.stamp_s <= 0.0:
+            # use_sim_time before the first /clock: the time is 0, the reading has no stamp.
+            self.problems.report('clock', 'no time yet (use_sim_time and no /clock so far): '
+                                 'joint state not published')
+            return
         msg = JointState()
         msg.header.stamp = rclpy.time.Time(nanoseconds=int(reading.stamp_s * 1e9)).to_msg()
         msg.name = [p['pan_joint'], p['tilt_joint'], p['zoom_joint']]

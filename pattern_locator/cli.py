@@ -21,6 +21,7 @@ from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
+DEMO_ROUTES = ('loop', 'tour', 'short', 'paper-stops')
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -131,7 +132,7 @@ def _parser() -> argparse.ArgumentParser:
                             'coloured light, chromatic shift, mirrors, dim, blur, occlusion, '
                             'interlace, far) next to AprilTag on the same frames')
     bench.add_argument('--output-dir', default='out',
-                       help='where the plots go (default out/)')
+                       help='where the plots, logs and summaries go (default out/)')
     bench.add_argument('--tracking', action='store_true',
                        help='the tracking loop in closed loop (sim + camera_driver + locator)')
     bench.add_argument('--node', action='store_true',
@@ -148,6 +149,19 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument('--survey', action='store_true',
                        help='the survey: map accuracy, ellipses and timings on rendered and '
                             'simulated walks, with and without odometry')
+    bench.add_argument('--drive', action='store_true',
+                       help='the drive through the floor (sim + camera_driver + locator) over '
+                            'several seeds: coverage, errors, handovers, head, VISCA')
+    bench.add_argument('--runs', type=_number_in(1, 100, int, '--runs'), default=3,
+                       help='--drive: seeds run, from --seed (default 3; --quick: 1)')
+    bench.add_argument('--route', choices=('loop', 'tour', 'short'), default='loop',
+                       help='--drive: the floor route (default loop; --quick: short)')
+    bench.add_argument('--max-speed', type=_number_in(0.05, 3.0, what='--max-speed'),
+                       default=0.5, help='--drive: cap on the speed (m/s, default 0.5)')
+    bench.add_argument('--compare-feed-forward', action='store_true',
+                       help='--drive: every seed with and without the odometry feed-forward')
+    bench.add_argument('--load', type=_number_in(0, 64, int, '--load'), default=0,
+                       help='--drive: add this many busy processes (a loaded machine)')
     bench.set_defaults(handler=_bench)
 
     survey = sub.add_parser(
@@ -232,18 +246,33 @@ def _parser() -> argparse.ArgumentParser:
                            '(an unknown name lists the known ones)')
     fake.set_defaults(handler=_fake_camera)
 
-    demo = sub.add_parser('demo', help="the simulated robot on the paper's route (make demo)",
+    demo = sub.add_parser('demo', help='the simulated robot drives through the floor '
+                          '(make demo)',
                           description='Run sim, camera_driver and locator as processes over '
-                                      "DDS along the paper's route; print the errors in the "
-                                      'form of its Table 1 and plot the paths.')
+                                      'DDS: the robot drives a route through the floor '
+                                      '(default loop); print a per-room table, plot the '
+                                      'floor, write out/demo_summary.json. --route '
+                                      "paper-stops: the paper's route in one room, its "
+                                      'Table 1.')
+    demo.add_argument('--route', choices=DEMO_ROUTES, default='loop',
+                      help='floor route (loop: 93 m, about 4 min; tour: 120 m, about 6.5 '
+                           "min; short: 12 m, 40 s) or paper-stops (the paper's room)")
+    demo.add_argument('--max-speed', type=_number_in(0.05, 3.0, what='--max-speed'),
+                      default=0.5, help='floor routes: cap on the speed (m/s, default 0.5)')
+    demo.add_argument('--no-feed-forward', action='store_true',
+                      help="floor routes: the driver ignores the base's odometry")
+    demo.add_argument('--interlace', action='store_true',
+                      help='floor routes: interlaced frames (two fields)')
     demo.add_argument('--estimator', choices=ESTIMATORS, default='exact',
                       help="the locator's pose estimator (default exact)")
-    demo.add_argument('--stops', type=int, default=30, help='route stops (1-30)')
-    demo.add_argument('--dwell', type=float, default=2.5, help='seconds at each stop')
+    demo.add_argument('--stops', type=int, default=30, help='paper-stops: route stops (1-30)')
+    demo.add_argument('--dwell', type=float, default=2.5,
+                      help='paper-stops: seconds at each stop')
     demo.add_argument('--zoom', action='store_true', help='let the driver zoom on the card')
     demo.add_argument('--core', action='store_true',
                       help="no ROS: the core alone on the paper's own camera (f = 25 mm)")
-    demo.add_argument('--seed', type=int, default=7, help='seed of --core')
+    demo.add_argument('--seed', type=int, default=7,
+                      help='seed of the images and the odometry (and of --core)')
     demo.add_argument('--output-dir', default='out',
                       help='where the plot and the node logs go (default out/)')
     demo.set_defaults(handler=_demo)
@@ -392,17 +421,24 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
-    kinds = [name for name in ('stress', 'node', 'tracking', 'fuzz', 'survey')
+    kinds = [name for name in ('stress', 'node', 'tracking', 'fuzz', 'survey', 'drive')
              if getattr(args, name)]
     if args.drive_core is not None:
         kinds.append('drive_core')
     if len(kinds) > 1:
-        raise ConfigError('bench: choose one of --stress, --node, --tracking, --fuzz, --survey, '
-                          '--drive-core (got '
+        raise ConfigError('bench: choose one of --stress, --node, --tracking, --fuzz, '
+                          '--survey, --drive, --drive-core (got '
                           f'{" and ".join("--" + k.replace("_", "-") for k in kinds)})')
     if args.drive_core is not None:
         from .evaluation.drive_core import main as drive_core_main
         return drive_core_main(args.drive_core)
+    if args.drive:
+        from .evaluation.bench_drive import run_drive_bench
+        return run_drive_bench(runs=1 if args.quick else args.runs, seed=args.seed,
+                               route='short' if args.quick else args.route,
+                               max_speed_m_s=args.max_speed,
+                               compare_feed_forward=args.compare_feed_forward, load=args.load,
+                               output_dir=args.output_dir)
     if args.tracking:
         from .evaluation.bench_tracking import run_tracking_bench
         return run_tracking_bench()
@@ -415,13 +451,15 @@ def _bench(args: argparse.Namespace) -> int:
     if args.node:
         from .evaluation.bench_node import run_node_bench
         return run_node_bench(frames_per_size=10 if args.quick else 40)
-    if args.drive_core is not None:
-        from .evaluation.drive_core import main as drive_core_main
-        return drive_core_main(args.drive_core)
-    kinds = [name for name in ('stress', 'node', 'tracking') if getattr(args, name)]
-    if len(kinds) > 1:
-        raise ConfigError(f'bench: choose one of --stress, --node, --tracking (got '
-                          f'{" and ".join("--" + k for k in kinds)})')
+    if args.survey:
+        from .evaluation.bench_survey import run_survey_bench
+        return run_survey_bench(quick=args.quick, seed=args.seed)
+    if args.scenes is not None and not 1 <= args.scenes <= 1000:
+        raise ConfigError(f'bench: --scenes must be 1..1000, got {args.scenes}')
+    if args.stress:
+        from .evaluation.stress import run_stress
+        return run_stress(per_camera=args.scenes or 10, seed=args.seed, quick=args.quick,
+                          output_dir=args.output_dir)
     from .evaluation.bench import run_bench
     return run_bench(scenes_per_bin=args.scenes or 40, seed=args.seed, quick=args.quick,
                      output_dir=args.output_dir)
@@ -475,6 +513,13 @@ def _demo(args: argparse.Namespace) -> int:
     if args.core:
         from .evaluation.demo import run_demo
         return run_demo(estimator=args.estimator, seed=args.seed, output_dir=args.output_dir)
+    if args.route != 'paper-stops':
+        from .evaluation.demo_system import run_floor_demo
+        return run_floor_demo(route=args.route, max_speed_m_s=args.max_speed,
+                              output_dir=args.output_dir, seed=args.seed,
+                              estimator=args.estimator, zoom_control=args.zoom,
+                              feed_forward=not args.no_feed_forward,
+                              interlace=args.interlace)
     if not 1 <= args.stops <= 30:
         raise ConfigError(f'demo: --stops must be 1..30, got {args.stops}')
     from .evaluation.demo_system import run_system_demo

@@ -19,6 +19,10 @@ Subscribes
     the camera_info of that time, the card's apparent size for the zoom.
     ``camera/camera_info`` (sensor-data QoS) when the node does not publish
     it itself.
+    ``odom`` (nav_msgs/Odometry, sensor-data QoS): the base's heading and
+    twist; with ``odometry_feed_forward`` the head turns against the base's
+    turns and follows the card's apparent motion from the base's
+    translation (``tracking.controller``).
 
 Publishes
     ``camera/joint_states`` (sensor_msgs/JointState, reliable, depth 10):
@@ -47,6 +51,7 @@ from typing import Any, Dict, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped
+from nav_msgs.msg import Odometry
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
@@ -72,7 +77,7 @@ TRACKING_PARAMETERS = (
     'gain', 'dead_band_deg', 'max_pan_speed_deg_s', 'max_tilt_speed_deg_s', 'pan_limits_deg',
     'tilt_limits_deg', 'target_timeout_s', 'search', 'search_ahead_first', 'search_after_s',
     'search_speed_deg_s', 'search_tilt_levels_deg', 'zoom_control', 'target_size_px',
-    'rate_hz')
+    'rate_hz', 'odometry_feed_forward', 'head_mount_pitch_deg')
 
 PARAMETERS: Tuple[Param, ...] = (
     Param('port', '/dev/ttyUSB0', 'serial port of the camera'),
@@ -101,6 +106,10 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('search_speed_deg_s', 20.0, 'pan speed of the sweep', 3.4, 80.0, dynamic=True),
     Param('search_tilt_levels_deg', [0.0, 15.0], 'tilt of successive sweep passes',
           dynamic=True),
+    Param('odometry_feed_forward', True, "turn the head against the base's turns and "
+          "follow the card through the base's motion, from odom", dynamic=True),
+    Param('head_mount_pitch_deg', 0.0, 'the camera is mounted pitched up by this on the tilt '
+          "link (the card's elevation for the feed-forward)", -60.0, 60.0, dynamic=True),
     Param('zoom_control', False, 'zoom to keep the card at target_size_px', dynamic=True),
     Param('target_size_px', 120.0, "the card's outer ring semi-axis to zoom to", 10.0, 1000.0,
           dynamic=True),
@@ -138,7 +147,9 @@ def tracking_params(p: Dict[str, Any]) -> TrackingParams:
         search_pan_speed=math.radians(p['search_speed_deg_s']),
         search_tilt_levels_rad=tuple(math.radians(float(v))
                                      for v in p['search_tilt_levels_deg']),
-        zoom_enabled=p['zoom_control'], target_size_px=p['target_size_px'])
+        zoom_enabled=p['zoom_control'], target_size_px=p['target_size_px'],
+        odometry_feed_forward=p['odometry_feed_forward'],
+        mount_pitch_rad=math.radians(p['head_mount_pitch_deg']))
 
 
 def _is_device_path(port: str) -> bool:
@@ -181,12 +192,14 @@ class CameraDriverNode(Node):
                                      qos_profile_sensor_data)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(PointStamped, 'pattern_locator/target', self._on_target, 10)
+        self.create_subscription(Odometry, 'odom', self._on_odometry, qos_profile_sensor_data)
         self.create_service(Trigger, '~/home', lambda req, res: self._trigger('home', res))
         self.create_service(Trigger, '~/reset', lambda req, res: self._trigger('reset', res))
         wall_timer(self, 1.0, self._publish_diagnostics)
         self.parameters.on_change(self._validate, self._apply)
         self.readings = 0
         self.targets = 0
+        self.odometry = 0
         self._last_reading_at: Optional[float] = None
         self._state = 'starting'
         self._failing = False
@@ -272,7 +285,23 @@ class CameraDriverNode(Node):
         if focal is not None:
             size = focal * self.card_radius_m / math.sqrt(sum(v * v for v in point))
         self.targets += 1
-        self.loop.on_target(stamp_seconds(msg.header.stamp), pan_error, tilt_error, size)
+        self.loop.on_target(stamp_seconds(msg.header.stamp), pan_error, tilt_error, size,
+                            math.sqrt(sum(v * v for v in point)))
+
+    def _on_odometry(self, msg: Odometry) -> None:
+        q = msg.pose.pose.orientation
+        twist = msg.twist.twist
+        values = (q.x, q.y, q.z, q.w, twist.linear.x, twist.linear.y, twist.angular.z)
+        if not all_finite(values) or q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w < 0.5:
+            self.problems.report('odom', f'ignored odometry with a non-finite value or no '
+                                 f'orientation: {quote(values)}')
+            return
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        controller = self.loop.controller
+        if controller is not None and controller.on_odometry(
+                stamp_seconds(msg.header.stamp), yaw, twist.linear.x, twist.linear.y,
+                twist.angular.z):
+            self.odometry += 1
 
     def _trigger(self, action: str, response: Trigger.Response) -> Trigger.Response:
         if not self.camera.ready:
@@ -350,6 +379,11 @@ class CameraDriverNode(Node):
         if not all_finite(values + (reading.stamp_s,)):
             self.problems.report('reading', f'head reading not finite: {values}')
             return
+        if reading.stamp_s <= 0.0:
+            # use_sim_time before the first /clock: the time is 0, the reading has no stamp.
+            self.problems.report('clock', 'no time yet (use_sim_time and no /clock so far): '
+                                 'joint state not published')
+            return
         msg = JointState()
         msg.header.stamp = rclpy.time.Time(nanoseconds=int(reading.stamp_s * 1e9)).to_msg()
         msg.name = [p['pan_joint'], p['tilt_joint'], p['zoom_joint']]
@@ -404,6 +438,7 @@ class CameraDriverNode(Node):
             'junk bytes': stats.junk_bytes, 'network changes': stats.network_changes,
             'sockets in use': ' '.join(str(s) for s in transport.sockets_in_use) or 'none',
             'joint states published': self.readings, 'targets received': self.targets,
+            'odometry received': self.odometry,
             'tracking mode': loop['mode'] if self.loop.controller is not None else 'off',
             'tracking commands': loop['commands sent'],
             'last error': (transport.last_error or loop['last error'])[:200],

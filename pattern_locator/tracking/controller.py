@@ -30,14 +30,29 @@ towards the aim. A straight-line fit over the recent aims gives the card's
 angular rate, which is fed forward and carries the aim up to now, so a
 card passing at a steady rate is followed without a lag.
 
+The base's odometry (:meth:`TrackingController.on_odometry`, with
+``odometry_feed_forward``): while the base turns, a card still in the world
+sweeps across the joint angles at minus the base's yaw rate, and the fit
+over aims in joint angles would learn that rate only after a window and
+keep it after the turn ended. With odometry the aims are kept in the odom
+frame's heading (``aim pan + base yaw at the image's stamp``); an aim is
+carried to now by the base's turn since its image (exact, from the
+odometry) and the head's rate is ``- yaw rate`` plus the card's apparent
+motion from the base's translation: for a card at bearing ``b`` (the pan
+aim), elevation ``e`` (the tilt aim plus the mount's pitch) and distance
+``d`` (the target's), a base moving at ``(vx, vy)`` in ``base_link`` sees it
+turn at ``(sin b vx - cos b vy) / (d cos e)`` in pan and ``sin e (cos b vx +
+sin b vy) / d`` in tilt. Without a distance the odom-frame aims' fitted rate
+stands in for the translation. In 'hold' the head keeps only this
+feed-forward (it turns against the base instead of stopping).
+
 Where to look: :mod:`~pattern_locator.tracking.params` (settings, speed
-steps), :mod:`~pattern_locator.tracking.history` (readings and aims, the
-rate fit), :mod:`~pattern_locator.tracking.zoom`,
-:mod:`~pattern_locator.tracking.search`; this module holds the modes and
-the per-axis speed choice. Other sources of an aim (a gaze target from the
-map) would go through :class:`~pattern_locator.tracking.history.AimTrack`,
-other feed-forward terms (the base's yaw rate from odometry) through
-:meth:`TrackingController._feed_forward`.
+steps), :mod:`~pattern_locator.tracking.history` (readings, aims, the
+rate fit, the base's odometry), :mod:`~pattern_locator.tracking.zoom`,
+:mod:`~pattern_locator.tracking.search`; this module holds the modes, the
+feed-forward (:meth:`TrackingController._feed_forward`) and the per-axis
+speed choice. Other sources of an aim (a gaze target from the map) would
+go through :class:`~pattern_locator.tracking.history.AimTrack`.
 """
 
 from dataclasses import dataclass
@@ -45,7 +60,7 @@ import math
 import threading
 from typing import List, Optional, Sequence, Tuple
 
-from .history import AimTrack, HeadHistory, HISTORY_S
+from .history import AimTrack, BaseTrack, HeadHistory, HISTORY_S
 from .params import (PAN_MAX_STEPS, PAN_STEP_RAD_S, quantise_speed, step_range, TILT_MAX_STEPS,
                      TILT_STEP_RAD_S, TrackingParams)
 from .search import SearchSweep
@@ -179,6 +194,11 @@ class TrackingController:
                               (self._pan.fastest, self._tilt.fastest))
         self._last_target_s: Optional[float] = None
         self._size_px: Optional[float] = None
+        self._base = BaseTrack()
+        # Whether the aims are in the odom frame's heading (else in joint angles).
+        self._aims_in_odom = False
+        # The newest target's distance (m), None when not given.
+        self._distance_m: Optional[float] = None
         self._start_s: Optional[float] = None
         self._mode = MODE_IDLE
         self._zoom = ZoomControl(p)
@@ -205,19 +225,50 @@ class TrackingController:
             self._head.add(float(stamp_s), float(pan), float(tilt), zoom_units)
         return True
 
+    def on_odometry(self, stamp_s: float, yaw: float, linear_x: float, linear_y: float,
+                    yaw_rate: float) -> bool:
+        """
+        Add an odometry sample: the base's heading in the odom frame and its twist.
+
+        ``yaw`` (rad), ``linear_x``, ``linear_y`` (m/s in ``base_link``),
+        ``yaw_rate`` (rad/s, positive = left). Returns False (and ignores
+        it) when a value is not finite or the stamp is not newer than the
+        last one. A stamp more than the history older than the newest
+        forgets the odometry (a clock jump).
+        """
+        values = (stamp_s, yaw, linear_x, linear_y, yaw_rate)
+        if not all(math.isfinite(float(v)) for v in values):
+            return False
+        with self._lock:
+            if self._base.jumped_back(float(stamp_s)):
+                self._base = BaseTrack()
+            return self._base.add(*(float(v) for v in values))
+
+    def _odometry_at(self, stamp_s: float) -> bool:
+        """Return whether odometry is fed forward for a time (fresh samples around it)."""
+        p = self._params
+        return (p.odometry_feed_forward and bool(self._base)
+                and stamp_s - self._base.newest_stamp <= p.odometry_timeout_s
+                and stamp_s >= self._base.stamps[0])
+
     def on_target(self, stamp_s: float, pan_error: float, tilt_error: float,
-                  size_px: Optional[float] = None) -> bool:
+                  size_px: Optional[float] = None, distance_m: Optional[float] = None) -> bool:
         """
         Add the locator's measurement for the image taken at ``stamp_s``.
 
         ``pan_error``, ``tilt_error``: the head motion (rad, REP 103) that
         would centre the card as seen in that image. ``size_px``: the card's
         apparent size (the outer ring's long semi-axis, px), used by the zoom.
-        Returns False (and ignores it) when there is no head reading yet, a
-        value is not finite, or a newer target was already taken.
+        ``distance_m``: the card's distance from the camera, used by the
+        odometry feed-forward. Returns False (and ignores it) when there is
+        no head reading yet, a value is not finite, or a newer target was
+        already taken.
         """
-        values = (stamp_s, pan_error, tilt_error) + (() if size_px is None else (size_px,))
+        values = (stamp_s, pan_error, tilt_error) + (() if size_px is None else (size_px,)) + (
+            () if distance_m is None else (distance_m,))
         if not all(math.isfinite(float(v)) for v in values):
+            return False
+        if distance_m is not None and float(distance_m) <= 0.0:
             return False
         stamp_s = float(stamp_s)
         with self._lock:
@@ -231,7 +282,15 @@ class TrackingController:
             head_pan, head_tilt = self._head.at(stamp_s)
             aim = (self._clamp(head_pan + float(pan_error), self._pan.limits),
                    self._clamp(head_tilt + float(tilt_error), self._tilt.limits))
+            in_odom = self._odometry_at(stamp_s)
+            if in_odom != self._aims_in_odom:
+                # The aims' frame changes: the old ones no longer compare.
+                self._aims.clear()
+                self._aims_in_odom = in_odom
+            if in_odom:
+                aim = (aim[0] + self._base_yaw(stamp_s), aim[1])
             self._aims.add(stamp_s, aim)
+            self._distance_m = None if distance_m is None else float(distance_m)
             self._last_target_s = stamp_s
             if size_px is not None:
                 self._size_px = float(size_px)
@@ -262,8 +321,7 @@ class TrackingController:
             elif mode == MODE_SEARCH:
                 command = self._search(now_s)
             elif mode == MODE_HOLD:
-                command = HeadCommand(zoom=self._zoom.out(self._head.zoom_units),
-                                      mode=MODE_HOLD)
+                command = self._hold(now_s)
             else:
                 command = HeadCommand(mode=MODE_IDLE)
             self._speeds = (command.pan_speed, command.tilt_speed)
@@ -291,18 +349,60 @@ class TrackingController:
         return (self._clamp(pan + v_pan * age, self._pan.limits),
                 self._clamp(tilt + v_tilt * age, self._tilt.limits))
 
-    def _feed_forward(self, now_s: float) -> Tuple[float, float]:
-        """Return the (pan, tilt) rate the head should follow besides the error: the card's."""
-        return self._aims.rate
+    def _base_yaw(self, stamp_s: float) -> float:
+        """Return the base's odometry heading at a stamp (carried on up to the timeout)."""
+        return self._base.yaw_at(stamp_s, self._params.odometry_timeout_s)
+
+    def _feed_forward(self, now_s: float) -> Tuple[Tuple[float, float], Tuple[float, float]]:
+        """
+        Return the newest aim carried to now and the rate to follow, both in joint angles.
+
+        Without odometry: the aim moved on by the card's fitted rate, and
+        that rate. With it (see the module docstring): the aim moved on by
+        the base's turn since its image and the card's rate from the base's
+        translation; the rate is that one minus the base's yaw rate.
+        """
+        stamp, aim_pan, aim_tilt = self._aims.newest
+        age = now_s - stamp
+        if not (self._aims_in_odom and self._odometry_at(now_s)):
+            if self._aims_in_odom:
+                # Aims in the odom frame but the odometry stopped: the aim as it
+                # was seen, at the heading the odometry last gave.
+                aim_pan -= self._base_yaw(stamp)
+                return (aim_pan, aim_tilt), (0.0, 0.0)
+            rate = self._aims.rate
+            return (aim_pan + rate[0] * age, aim_tilt + rate[1] * age), rate
+        yaw_stamp, yaw_now = self._base_yaw(stamp), self._base_yaw(now_s)
+        linear_x, linear_y, yaw_rate = self._base.newest
+        translation = self._aims.rate
+        if self._distance_m is not None:
+            bearing = aim_pan - yaw_stamp
+            elevation = aim_tilt + self._params.mount_pitch_rad
+            horizontal = self._distance_m * max(math.cos(elevation), 0.05)
+            c, s = math.cos(bearing), math.sin(bearing)
+            translation = ((s * linear_x - c * linear_y) / horizontal,
+                           math.sin(elevation) * (c * linear_x + s * linear_y)
+                           / self._distance_m)
+        aim = (aim_pan - yaw_now + translation[0] * age, aim_tilt + translation[1] * age)
+        return aim, (translation[0] - yaw_rate, translation[1])
+
+    def _hold(self, now_s: float) -> HeadCommand:
+        """No fresh target: stop, or with odometry follow only the feed-forward."""
+        zoom = self._zoom.out(self._head.zoom_units)
+        if not (self._aims and self._aims_in_odom and self._odometry_at(now_s)):
+            return HeadCommand(zoom=zoom, mode=MODE_HOLD)
+        pan, tilt = self._head_now(now_s)
+        _, rates = self._feed_forward(now_s)
+        return HeadCommand(self._pan.within_travel(pan, self._pan.nearest(rates[0])),
+                           self._tilt.within_travel(tilt, self._tilt.nearest(rates[1])),
+                           zoom, MODE_HOLD)
 
     def _track(self, now_s: float) -> HeadCommand:
-        stamp, aim_pan, aim_tilt = self._aims.newest
         pan, tilt = self._head_now(now_s)
-        rates = self._feed_forward(now_s)
+        aims, rates = self._feed_forward(now_s)
         speeds, errors = [], []
-        for axis, aim, rate, position in ((self._pan, aim_pan, rates[0], pan),
-                                          (self._tilt, aim_tilt, rates[1], tilt)):
-            carried = aim + rate * (now_s - stamp)
+        for axis, carried, rate, position in ((self._pan, aims[0], rates[0], pan),
+                                              (self._tilt, aims[1], rates[1], tilt)):
             aim_now = self._clamp(carried, axis.limits)
             if aim_now != carried:
                 # The card is beyond the travel: wait at the limit, do not chase it.
@@ -339,6 +439,8 @@ class TrackingController:
         """Sweep first back through straight ahead, else where the card was last seen."""
         head_pan = self._head.newest[0] if self._head else None
         card_pan = self._aims.newest[1] if self._aims else None
+        if card_pan is not None and self._aims_in_odom:
+            card_pan -= self._base_yaw(self._aims.newest[0])
         self._sweep.start(head_pan, card_pan, self._aims.rate[0])
 
     def _search(self, now_s: float) -> HeadCommand:

@@ -169,11 +169,12 @@ class HeadLoop:
         return reading
 
     def on_target(self, stamp_s: float, pan_error: float, tilt_error: float,
-                  size_px: float) -> bool:
+                  size_px: Optional[float], distance_m: Optional[float] = None) -> bool:
         """Pass a target to the controller (from any thread); False if it was ignored."""
-        if self.controller is None:
+        controller = self.controller
+        if controller is None:
             return False
-        return self.controller.on_target(stamp_s, pan_error, tilt_error, size_px)
+        return controller.on_target(stamp_s, pan_error, tilt_error, size_px, distance_m)
 
     def reset_tracking(self) -> None:
         """Forget the controller's history (after a reconnect or a home/reset)."""

@@ -4,8 +4,11 @@ What the tracking controller remembers: the head's recent readings and the card'
 ROS-free, not thread-safe (the controller holds its lock). :class:`HeadHistory`
 keeps the head's readings by stamp, so the head's angles when an image was
 taken can be interpolated. :class:`AimTrack` keeps the aims (the joint
-angles that centre the card, one per target) and fits the card's angular
-rate over the recent ones, which the controller feeds forward.
+angles that centre the card, one per target, or, with odometry, the same
+turned into the odom frame's heading) and fits the card's angular rate over
+the recent ones, which the controller feeds forward. :class:`BaseTrack`
+keeps the base's odometry (heading and twist), so the head can turn against
+the base's turns.
 """
 
 import bisect
@@ -107,6 +110,11 @@ class AimTrack:
         """Return the newest aim as (stamp, pan, tilt); there must be one."""
         return self.aims[-1]
 
+    def clear(self) -> None:
+        """Forget every aim and the rate (the aims' frame changed)."""
+        self.aims.clear()
+        self.rate = (0.0, 0.0)
+
     def add(self, stamp_s: float, aim: Tuple[float, float]) -> None:
         """Add an aim; a gap or a jump off the fitted line starts the fit over."""
         if self.aims:
@@ -143,3 +151,75 @@ class AimTrack:
             fastest = self.fastest[k - 1]
             rates.append(min(max(rate, -fastest), fastest))
         return rates[0], rates[1]
+
+
+class BaseTrack:
+    """
+    The base's odometry of the last :data:`HISTORY_S`: heading (unwrapped) and twist by stamp.
+
+    Only the heading and the twist in ``base_link`` are kept: the head's
+    feed-forward needs how far the base turned between two instants
+    (:meth:`yaw_at`, exact up to the odometry's own drift, which over a
+    second is far below a degree) and how it moves now (:attr:`newest`).
+    """
+
+    def __init__(self) -> None:
+        self.stamps: List[float] = []
+        self.yaws: List[float] = []
+        # (linear x, linear y, yaw rate) per sample.
+        self.twists: List[Tuple[float, float, float]] = []
+
+    def __bool__(self) -> bool:
+        return bool(self.stamps)
+
+    @property
+    def newest_stamp(self) -> float:
+        """Return the newest sample's stamp (there must be one)."""
+        return self.stamps[-1]
+
+    @property
+    def newest(self) -> Tuple[float, float, float]:
+        """Return the newest twist (linear x, linear y, yaw rate); there must be one."""
+        return self.twists[-1]
+
+    def jumped_back(self, stamp_s: float) -> bool:
+        """Return True for a stamp older than anything kept: the clock jumped back."""
+        return bool(self.stamps) and stamp_s < self.stamps[-1] - HISTORY_S
+
+    def add(self, stamp_s: float, yaw: float, linear_x: float, linear_y: float,
+            yaw_rate: float) -> bool:
+        """Append a sample (stamps must increase: an older or equal one is ignored)."""
+        if self.stamps and stamp_s <= self.stamps[-1]:
+            return False
+        if self.yaws:
+            # Unwrap against the previous heading: the base never turns half a turn
+            # between two odometry samples.
+            yaw = self.yaws[-1] + math.remainder(yaw - self.yaws[-1], 2.0 * math.pi)
+        self.stamps.append(stamp_s)
+        self.yaws.append(yaw)
+        self.twists.append((linear_x, linear_y, yaw_rate))
+        keep = bisect.bisect_right(self.stamps, stamp_s - HISTORY_S) - 1
+        if keep > 0:
+            del self.stamps[:keep]
+            del self.yaws[:keep]
+            del self.twists[:keep]
+        return True
+
+    def yaw_at(self, stamp_s: float, max_extrapolation_s: float) -> float:
+        """
+        Return the heading (unwrapped, rad) at a stamp.
+
+        Interpolated between samples; beyond the newest, carried on at its
+        yaw rate for at most ``max_extrapolation_s``; before the oldest, the
+        oldest.
+        """
+        stamps = self.stamps
+        i = bisect.bisect_right(stamps, stamp_s)
+        if i == 0:
+            return self.yaws[0]
+        if i == len(stamps):
+            ahead = min(stamp_s - stamps[-1], max_extrapolation_s)
+            return self.yaws[-1] + self.twists[-1][2] * ahead
+        t0, t1 = stamps[i - 1], stamps[i]
+        w = (stamp_s - t0) / (t1 - t0)
+        return self.yaws[i - 1] + w * (self.yaws[i] - self.yaws[i - 1])

@@ -96,6 +96,14 @@ class TrackingParams:
     * ``rate_window_s``: the span of recent aims fitted for the card's
       angular rate (0 = no rate feed-forward). Rates under half the slowest
       step are taken as 0.
+    * ``odometry_feed_forward``: with the base's odometry (``on_odometry``)
+      the head turns against the base's yaw rate and follows the card's
+      apparent motion from the base's translation (at the card's distance,
+      when the target gives it), and an aim is carried from its image's
+      stamp to now by the base's turn in between. Odometry older than
+      ``odometry_timeout_s`` is not used. ``mount_pitch_rad``: the camera
+      looks up by this at tilt 0 (the card's elevation for the translation
+      term is the tilt aim plus this).
     * Zoom (if ``zoom_enabled``): start zooming when the card's size is
       off ``target_size_px`` by more than ``zoom_band`` (relative), stop
       when back within a third of it; never zoom in while the error
@@ -121,6 +129,9 @@ class TrackingParams:
     search_after_s: float = 3.0
     search_pan_speed: float = math.radians(20.0)
     search_tilt_levels_rad: Tuple[float, ...] = (0.0, math.radians(15.0))
+    odometry_feed_forward: bool = True
+    odometry_timeout_s: float = 0.5
+    mount_pitch_rad: float = 0.0
     zoom_enabled: bool = False
     target_size_px: float = 120.0
     zoom_band: float = 0.15
@@ -133,14 +144,23 @@ class TrackingParams:
         for name in ('gain', 'max_pan_speed', 'max_tilt_speed', 'min_pan_speed',
                      'min_tilt_speed', 'control_period_s', 'target_timeout_s',
                      'head_timeout_s', 'search_after_s', 'search_pan_speed',
-                     'target_size_px', 'zoom_max_error_rad'):
+                     'target_size_px', 'zoom_max_error_rad', 'odometry_timeout_s'):
             put(name, _positive(name, getattr(self, name)))
         for name in ('dead_band_rad', 'resume_band_rad', 'rate_window_s'):
             put(name, _positive(name, getattr(self, name), allow_zero=True))
-        for name in ('search_enabled', 'search_ahead_first', 'zoom_enabled'):
+        for name in ('search_enabled', 'search_ahead_first', 'zoom_enabled',
+                     'odometry_feed_forward'):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f'tracking: {name} must be true or false, got '
                                   f'{getattr(self, name)!r}')
+        try:
+            pitch = float(self.mount_pitch_rad)
+        except (TypeError, ValueError):
+            pitch = math.nan
+        if not (math.isfinite(pitch) and abs(pitch) < math.pi / 2):
+            raise ConfigError(f'tracking: mount_pitch_rad must be within +-90 deg, got '
+                              f'{self.mount_pitch_rad!r}')
+        put('mount_pitch_rad', pitch)
         if self.resume_band_rad < self.dead_band_rad:
             raise ConfigError(f'tracking: resume_band_rad ({self.resume_band_rad!r}) must be '
                               f'>= dead_band_rad ({self.dead_band_rad!r})')

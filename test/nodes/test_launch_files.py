@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LAUNCH = ROOT / 'launch'
 COMMON = ['namespace', 'use_sim_time', 'params_file', 'log_level']
 EXPECTED = {'locator.launch.py': COMMON, 'robot.launch.py': COMMON + ['port'],
-            'sim.launch.py': COMMON + ['port']}
+            'sim.launch.py': COMMON + ['port', 'world', 'mount_pitch_deg']}
 
 
 def load(name: str):
@@ -56,6 +56,25 @@ def test_two_simulated_robots_get_two_camera_ports():
     first, second = module.camera_port('', 'robot1'), module.camera_port('', '/robot2')
     assert first != second and first.endswith('evi_d31') and 'robot2' in second
     assert module.camera_port('/dev/pts/7', 'robot1') == '/dev/pts/7'
+
+
+def test_the_sim_world_tells_every_node_the_same():
+    """world:=floor gives the locator the floor's map; the mount pitch reaches all three."""
+    module = load('sim.launch.py')
+    share = '/opt/ros/jazzy/share/pattern_locator'
+    floor = module.world_defaults(share, 'floor', '15.0')
+    assert floor['sim'] == {'world': 'floor', 'head_mount_pitch_deg': 15.0}
+    assert floor['camera_driver'] == {'head_mount_pitch_deg': 15.0}
+    assert floor['locator']['building_map'] == f'{share}/config/floor_building.yaml'
+    assert floor['locator']['gates.footprint'] == 'building'
+    assert floor['locator']['head.mount_pitch_deg'] == 15.0
+    paper = module.world_defaults(share, 'paper', '0')
+    assert 'building_map' not in paper['locator'] and paper['sim']['world'] == 'paper'
+    with pytest.raises(ValueError, match='floor or paper'):
+        module.world_defaults(share, 'moon', '0')
+    # The installed file, then the world's values, then the user's file (it wins).
+    assert module.node_parameters(share, 'sim.yaml', '/my.yaml', 'true', floor['sim']) == [
+        f'{share}/config/sim.yaml', floor['sim'], '/my.yaml', {'use_sim_time': True}]
 
 
 def test_installed_files_apply_in_any_namespace():

@@ -230,8 +230,8 @@ def test_two_namespaced_robots_side_by_side_on_one_domain(tmp_path):
                 link = tmp_path / ns / 'evi_d31'
                 route = SimRoute([stop], mode='stops', dwell_s=120.0)
                 for module, parameters in (
-                        ('sim_node', [f'camera_link:={link}', 'init_s:=0.3', 'dwell_s:=120.0',
-                                      route_stops_parameter(route)]),
+                        ('sim_node', [f'camera_link:={link}', 'world:=paper', 'init_s:=0.3',
+                                      'dwell_s:=120.0', route_stops_parameter(route)]),
                         ('camera_driver_node', [f'port:={link}', 'search:=false']),
                         ('locator_node', [])):
                     procs.append(stack.enter_context(node_process(
@@ -280,8 +280,9 @@ def test_two_namespaced_robots_side_by_side_on_one_domain(tmp_path):
 def test_demo_runs_end_to_end_within_its_tolerance(tmp_path):
     out = tmp_path / 'out'
     proc = subprocess.run(
-        [sys.executable, '-m', 'pattern_locator.cli', 'demo', '--stops', '4', '--dwell',
-         '3', '--output-dir', str(out)], capture_output=True, text=True, timeout=120)
+        [sys.executable, '-m', 'pattern_locator.cli', 'demo', '--route', 'paper-stops',
+         '--stops', '4', '--dwell', '3', '--output-dir', str(out)], capture_output=True,
+        text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = re.findall(r'^\s+\d+\s+(\d+)\s+(?:[-\d.]+\s+){6}([\d.]+)\s+1/3/\d$', proc.stdout,
                       re.MULTILINE)

@@ -38,7 +38,7 @@ optical frame, and the head's turn to it is ``-atan2(x, z)``.
 
 from dataclasses import dataclass
 import math
-from typing import Dict, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -46,7 +46,7 @@ from .building import BuildingMap
 from .gaze import GazeParameters, GazePlanner
 from .head import HeadGeometry
 from .odom import BaseTwist
-from ..errors import ConfigError
+from ..errors import ConfigError, PatternLocatorError
 from ..vision.camera import CameraModel
 from ..vision.geometry import Pose
 
@@ -232,6 +232,59 @@ class TargetChooser:
             self._current = None
         else:
             self._misses[ids] = misses
+
+
+def card_centre_from_homography(H: np.ndarray, camera: CameraModel) -> Optional[np.ndarray]:
+    """
+    Return a card centre's position in the optical frame (m) from its plane homography.
+
+    ``H`` maps the card plane (metres, centre at the origin) to undistorted
+    pixels: ``H ~ K [r1 r2 t]``, so ``t`` is ``K^-1 H``'s third column
+    scaled by the mean norm of the first two. None if it is degenerate.
+    """
+    try:
+        M = np.linalg.solve(camera.K, np.asarray(H, dtype=float))
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    if not (math.isfinite(scale) and scale > 0.0):
+        return None
+    t = M[:, 2] / scale
+    if t[2] < 0.0:
+        t = -t
+    return t if bool(np.all(np.isfinite(t))) and t[2] > 0.0 else None
+
+
+def seen_cards(result, camera: CameraModel, building: BuildingMap
+               ) -> Tuple[List[SeenCard], bool]:
+    """
+    Return the cards a frame detected (biggest first) with their centres, and a flag.
+
+    ``result``: a ``localizer.FrameResult``. A card's centre comes from its
+    pose when the fix used it (``fix.T_camera_card``), else from its plane
+    homography; ``ids`` only for cards in ``building``. Cards whose centre
+    is not a finite point in front of the camera are left out; the flag
+    says whether the biggest card was (a problem to report).
+    """
+    seen: List[SeenCard] = []
+    biggest_lost = False
+    fix = result.fix
+    for k, det in enumerate(result.detections):
+        if fix is not None and fix.ids == det.ids and fix.size_px == det.size_px:
+            point = np.asarray(fix.T_camera_card.t, dtype=float)
+        else:
+            point = card_centre_from_homography(det.homography, camera)
+        if point is None or not bool(np.all(np.isfinite(point))) or point[2] <= 0.0:
+            biggest_lost = biggest_lost or k == 0
+            continue
+        ids = None
+        if det.ids is not None:
+            try:
+                ids = building.card(det.ids).ids.as_tuple()
+            except PatternLocatorError:
+                ids = None                # not in the map: only the no-pose rule takes it
+        seen.append(SeenCard(ids, _point(point)))
+    return seen, biggest_lost
 
 
 def biggest_seen(seen: Sequence[SeenCard], reason: str) -> TargetChoice:

@@ -10,7 +10,10 @@ Subscribes
     stamp, so each image uses the intrinsics of its own stamp: a zoom
     camera's change), ``camera/joint_states`` (sensor_msgs/JointState,
     reliable: ``camera_pan``/``camera_tilt``, used while
-    ``use_joint_states`` is true, else the fixed angles).
+    ``use_joint_states`` is true, else the fixed angles), ``odom``
+    (nav_msgs/Odometry, reliable, while ``use_odometry`` is true: the base's
+    motion since the last fix for the continuity gate, its twist for the
+    covariance, the bridge and the gaze).
 
 Publishes
     ``robot_location`` (geometry_msgs/PoseStamped: the base pose, the image's
@@ -19,8 +22,14 @@ Publishes
     ``robot_location/with_covariance``
     (geometry_msgs/PoseWithCovarianceStamped; transient local, depth 1, like
     AMCL's ``amcl_pose``: a late subscriber gets the last fix),
+    ``robot_location/odom_bridged`` (geometry_msgs/PoseWithCovarianceStamped:
+    the last fix carried forward by odometry, at the odometry's rate and
+    stamps, its covariance growing; robot_location's frame),
     ``pattern_locator/target`` (geometry_msgs/PointStamped: the centre of the
-    biggest card seen, in ``camera_optical_frame``, metres),
+    card the head should centre, in ``camera_optical_frame``, metres, the
+    image's stamp; chosen by the map-guided gaze from the bridged pose,
+    ``localization/target_choice.py``: the card as seen, or its centre
+    predicted at a handover; without odometry the biggest card seen),
     ``pattern_locator/debug_image`` (only drawn while someone subscribes) and
     ``/diagnostics``.
 
@@ -42,7 +51,7 @@ import dataclasses
 import math
 import threading
 import time
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -69,7 +78,7 @@ from ..localization.head import (angles_from_joint_state, HeadGeometry, HeadMoti
 from ..localization.localizer import (FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotFix,
                                       RobotLocalizer)
 from ..localization.odom import BaseTwist, BridgedPose, covariance_from_ros, OdomBridge, OdomBuffer
-from ..localization.target_choice import biggest_seen, SeenCard, TargetChoice, TargetChooser
+from ..localization.target_choice import biggest_seen, seen_cards, TargetChoice, TargetChooser
 from ..localization.uncertainty import TERMS, UncertaintyParameters
 from ..vision.camera import CameraModel
 from ..vision.geometry import Pose, rotation_from_quaternion
@@ -282,27 +291,6 @@ def uncertainty_parameters(values: Dict[str, Any]) -> UncertaintyParameters:
 def gaze_parameters(values: Dict[str, Any]) -> GazeParameters:
     """Return the gaze planner's parameters from the node's ``gaze.*`` parameter values."""
     return GazeParameters(**_group(values, 'gaze'))
-
-
-def card_centre_from_homography(H: np.ndarray, camera: CameraModel) -> Optional[np.ndarray]:
-    """
-    Return a card centre's position in the optical frame (m) from its plane homography.
-
-    ``H`` maps the card plane (metres, centre at the origin) to undistorted
-    pixels: ``H ~ K [r1 r2 t]``, so ``t`` is ``K^-1 H``'s third column
-    scaled by the mean norm of the first two. None if it is degenerate.
-    """
-    try:
-        M = np.linalg.solve(camera.K, np.asarray(H, dtype=float))
-    except (np.linalg.LinAlgError, ValueError):
-        return None
-    scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
-    if not (math.isfinite(scale) and scale > 0.0):
-        return None
-    t = M[:, 2] / scale
-    if t[2] < 0.0:
-        t = -t
-    return t if all_finite(t) and t[2] > 0.0 else None
 
 
 def rejection_reasons(result: FrameResult) -> Sequence[str]:
@@ -817,34 +805,13 @@ class LocatorNode(Node):
 
     # Output ---------------------------------------------------------------------
 
-    def _seen_cards(self, result: FrameResult, camera: CameraModel) -> List[SeenCard]:
-        """Return the cards detected in the image (biggest first) with their centres (m)."""
-        seen = []
-        fix = result.fix
-        for det in result.detections:
-            if fix is not None and fix.ids == det.ids and fix.size_px == det.size_px:
-                point = np.asarray(fix.T_camera_card.t, dtype=float)
-            else:
-                point = card_centre_from_homography(det.homography, camera)
-            if point is None or not all_finite(point) or point[2] <= 0.0:
-                if not seen:
-                    self.problems.report('rejected: non-finite target',
-                                         'no target from the biggest card: its centre is not '
-                                         'finite')
-                continue
-            ids = None
-            if det.ids is not None:
-                try:
-                    ids = self.building.card(det.ids).ids.as_tuple()
-                except PatternLocatorError:
-                    ids = None                # not in the map: only the no-pose rule takes it
-            seen.append(SeenCard(ids, tuple(float(v) for v in point)))
-        return seen
-
     def _choose_target(self, result: FrameResult, camera: CameraModel, motion: HeadMotion,
                        stamp: float, twist: Optional[BaseTwist]) -> TargetChoice:
         """Return the image's target: the gaze planner's card, else the biggest card seen."""
-        seen = self._seen_cards(result, camera)
+        seen, biggest_lost = seen_cards(result, camera, self.building)
+        if biggest_lost:
+            self.problems.report('rejected: non-finite target',
+                                 'no target from the biggest card: its centre is not finite')
         s = self.settings
         if not s['use_gaze']:
             self.chooser.reset()

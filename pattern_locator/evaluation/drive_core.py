@@ -767,10 +767,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--as-hung', action='store_true',
                         help='cards off their mapped pose (the map giving its std_dev)')
     parser.add_argument('--driver', choices=DRIVERS, default='planner',
-                        help="planner: the driver aims with the gaze planner itself; target: "
+                        help='planner: the driver aims with the gaze planner itself; target: '
                              "a map-free driver centres the locator's target (as the nodes)")
     parser.add_argument('--no-odometry', action='store_true',
-                        help='the locator takes no odometry (the gates\' speed limits; no '
+                        help="the locator takes no odometry (the gates' speed limits; no "
                              'bridge, so no gaze)')
     parser.add_argument('--no-gaze', action='store_true',
                         help="the locator's target is the biggest card seen (--driver target)")

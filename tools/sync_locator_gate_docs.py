@@ -1,9 +1,13 @@
 """
-Write the locator's ``gates.*`` parameters into docs/ros.md and config/locator.yaml.
+Write the locator's parameter groups into docs/ros.md and config/locator.yaml.
 
-The gates' thresholds are declared from ``localization.gates.GateParameters``;
-this keeps the two hand-read files in step with it (test_ros_doc and
-test_system check that they are). Run from the repository root:
+The groups ``gates.*``, ``uncertainty.*`` and ``gaze.*`` are declared from
+the cores' dataclasses (``GateParameters``, ``UncertaintyParameters``,
+``GazeParameters``; ``locator_node.PARAMETER_GROUPS``); this keeps the two
+hand-read files in step with them (test_ros_doc and test_system check that
+they are). A group's rows (lines) are replaced where they stand; a group
+not there yet goes right after the group before it. Run from the
+repository root:
 
     .venv/bin/python tools/sync_locator_gate_docs.py
 """
@@ -11,7 +15,7 @@ test_system check that they are). Run from the repository root:
 from pathlib import Path
 import re
 
-from pattern_locator.nodes.locator_node import PARAMETERS
+from pattern_locator.nodes.locator_node import PARAMETER_GROUPS, PARAMETERS
 
 
 def _doc_row(p) -> str:
@@ -30,20 +34,35 @@ def _yaml_line(p) -> str:
     return f'    {p.name}: {value}'
 
 
+def _replace(text: str, prefix: str, previous: str, block: str, pattern: str, where: str
+             ) -> str:
+    """Replace the lines of group ``prefix`` with ``block`` (after ``previous``'s if absent)."""
+    lines = pattern.format(re.escape(prefix + '.'))
+    text, n = re.subn(lines, lambda m: block, text, count=1)
+    if n == 1:
+        return text
+    before = pattern.format(re.escape(previous + '.'))
+    text, n = re.subn(before, lambda m: m.group(0) + block, text, count=1)
+    assert n == 1, f'{where} has neither {prefix} nor {previous} lines'
+    return text
+
+
 def main() -> None:
-    gates = [p for p in PARAMETERS if p.name.startswith('gates.')]
     doc = Path('docs/ros.md')
-    text = doc.read_text()
-    rows = '\n'.join(_doc_row(p) for p in gates) + '\n'
-    text, n = re.subn(r'(\| `gates\.[^\n]*\n)+', lambda m: rows, text, count=1)
-    assert n == 1, 'docs/ros.md has no gates rows to replace'
-    doc.write_text(text)
     config = Path('config/locator.yaml')
-    text = config.read_text()
-    lines = '\n'.join(_yaml_line(p) for p in gates) + '\n'
-    text, n = re.subn(r'(    gates\.[^\n]*\n)+', lambda m: lines, text, count=1)
-    assert n == 1, 'config/locator.yaml has no gates lines to replace'
-    config.write_text(text)
+    doc_text, config_text = doc.read_text(), config.read_text()
+    previous = None
+    for prefix, _, _ in PARAMETER_GROUPS:
+        group = [p for p in PARAMETERS if p.name.startswith(prefix + '.')]
+        rows = '\n'.join(_doc_row(p) for p in group) + '\n'
+        lines = '\n'.join(_yaml_line(p) for p in group) + '\n'
+        doc_text = _replace(doc_text, prefix, previous, rows, r'(\| `{}[^\n]*\n)+',
+                            'docs/ros.md')
+        config_text = _replace(config_text, prefix, previous, lines, r'(    {}[^\n]*\n)+',
+                               'config/locator.yaml')
+        previous = prefix
+    doc.write_text(doc_text)
+    config.write_text(config_text)
 
 
 if __name__ == '__main__':

@@ -16,12 +16,19 @@ and plays the robot's parts the way the nodes will, without ROS:
   the last fix carried forward by odometry (``OdomBridge``), the
   feed-forward rates that cancel the base's motion plus a proportional
   term, quantised to speed steps; zoom so that the card is about a quarter
-  of the image wide. Without a pose, or with no card predicted, it sweeps;
+  of the image wide. Without a pose, or with no card predicted, it sweeps.
+  With ``--driver target`` the driver is map-free, as the camera_driver
+  node: it centres the locator's target (``TargetChooser``, what the
+  locator node publishes on ``pattern_locator/target``: the gaze planner's
+  card as seen or predicted, or with ``--no-gaze`` and without odometry
+  the biggest card seen), adds the feed-forward of the base's twist, holds
+  the head 0.5 s after the last target and sweeps after 3 s;
 * **the locator**: each frame (``--rate`` per second, motion blur and
   optionally interlace rendered by the sim) goes to ``RobotLocalizer``
   with the head's angles interpolated to the image's stamp from the joint
   states that have arrived 50 ms after it (``JointStateBuffer``), the
-  odometry since the last fix and the base's twist (``OdomBuffer``);
+  odometry since the last fix and the base's twist (``OdomBuffer``;
+  ``--no-odometry``: none, the gates' speed limits instead, no bridge);
 * **the truth**: the sim's base pose at each image's stamp and the head's
   true angles.
 
@@ -54,6 +61,7 @@ from ..localization.head import angle_jacobian, base_pose_from_camera, HeadGeome
     HeadStateError, JointStateBuffer
 from ..localization.localizer import RobotLocalizer
 from ..localization.odom import BaseTwist, OdomBridge, OdomBuffer
+from ..localization.target_choice import biggest_seen, seen_cards, TargetChooser
 from ..localization.uncertainty import chi2_95, UncertaintyParameters
 from ..sim.floor_sim import Exposure, FloorSim
 from ..visca.zoom_table import ZoomTable
@@ -74,6 +82,10 @@ CHI2_3 = chi2_95(3)
 SEARCH_PAN_RAD_S = math.radians(80.0 / 24.0 * 4)
 SEARCH_TILT_RAD = math.radians(14.0)
 SEARCH_FX_PX = 1500.0
+# The map-free driver (--driver target): the camera_driver's defaults.
+TARGET_TIMEOUT_S = 0.5
+SEARCH_AFTER_S = 3.0
+DRIVERS = ('planner', 'target')
 
 
 @dataclass(frozen=True)
@@ -179,6 +191,11 @@ class FrameRecord:
     bridge_error_m: Optional[float] = None
     bridge_d2: Optional[float] = None
     bridge_age_s: Optional[float] = None
+    # The locator's target (--driver target): the point, the head angles it is
+    # relative to, its source and reason.
+    target: Optional[Tuple[Tuple[float, float, float], float, float]] = None
+    target_source: str = ''
+    target_reason: str = ''
     problem: str = ''
     rejections: Tuple[str, ...] = ()         # gates that refused a fix in this frame
 
@@ -197,6 +214,9 @@ class DriveCoreConfig:
     seed: int = 1
     timing: JointTiming = JointTiming()
     uncertainty: Optional[UncertaintyParameters] = None
+    driver: str = 'planner'               # 'planner' | 'target' (map-free, the locator's target)
+    odometry: bool = True                 # the locator takes odometry (else speed limits)
+    gaze: bool = True                     # the locator's target from the gaze planner
 
 
 def _uncertainty(config: DriveCoreConfig) -> Optional[UncertaintyParameters]:
@@ -239,6 +259,8 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
     odom = OdomBuffer()
     bridge = OdomBridge(odom, building)
     planner = GazePlanner(building, head)
+    chooser = TargetChooser(building, head) if config.driver == 'target' else None
+    target: Optional[FrameRecord] = None
     sim_head = SimHead(head, 0.0, math.radians(12.0))
     zoom = 0.0
     duration = sim.duration_s if config.seconds is None else min(sim.duration_s, config.seconds)
@@ -280,16 +302,24 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
             pending.sort()
             next_inquiry += timing.period_s + rng.uniform(-1.0, 1.0) * timing.period_jitter_s
             # The driver's cycle: decide on the reading that has just come back.
-            current, zoom, search_dir = _control(
-                t + 0.03, sim_head, last_reading, bridge, odom, planner, head, building,
-                current, zoom, search_dir, zoom_table, pattern.card_size, timing, rng)
+            if chooser is not None:
+                zoom, search_dir = _control_target(
+                    t + 0.03, sim_head, last_reading, target, odom if config.odometry else None,
+                    head, zoom, search_dir, zoom_table, pattern.card_size, timing, rng)
+            else:
+                current, zoom, search_dir = _control(
+                    t + 0.03, sim_head, last_reading, bridge, odom, planner, head, building,
+                    current, zoom, search_dir, zoom_table, pattern.card_size, timing, rng)
         if t + 1e-9 >= next_frame + 0.05 + EXPOSURES[config.exposure].exposure_s:
             stamp = next_frame
             next_frame += 1.0 / config.frame_rate_hz
             camera = zoom_table.camera_at(zoom)
             frame = sim.frame(stamp, sim_head, camera, seed=frame_seed + len(records))
             records.append(_locate(frame, camera, stamp, localizer, joints, odom, bridge,
-                                   building, head, sim_head, world, T_building_odom, config))
+                                   building, head, sim_head, world, T_building_odom, config,
+                                   chooser))
+            if records[-1].target is not None:
+                target = records[-1]
     return records
 
 
@@ -344,15 +374,73 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
     return choice.ids.as_tuple(), zoom, search_dir
 
 
+def _control_target(t: float, sim_head: SimHead, reading, target: Optional[FrameRecord],
+                    odom: Optional[OdomBuffer], head: HeadGeometry, zoom: float,
+                    search_dir: float, zoom_table: ZoomTable, card_size: float,
+                    timing: JointTiming, rng) -> Tuple[float, float]:
+    """
+    One cycle of a map-free driver: centre the locator's latest target, else hold, else sweep.
+
+    The target's aim is the head's angles at the image's stamp plus the
+    target's direction (``-atan2(x, z)``, ``-atan2(y, hypot(x, z))``), carried
+    to now by the feed-forward rates of the base's twist (odometry), plus a
+    proportional term.
+    """
+    stamp, pan_read, tilt_read = reading
+    rp, rt = sim_head.rates_at(t)
+    pan_now, tilt_now = pan_read + rp * (t - stamp), tilt_read + rt * (t - stamp)
+    latency = rng.uniform(*timing.command_latency_s)
+    age = math.inf if target is None else t - target.t
+    if age > SEARCH_AFTER_S:
+        if pan_now > math.radians(90.0):
+            search_dir = -1.0
+        elif pan_now < math.radians(-90.0):
+            search_dir = 1.0
+        tilt_rate = 2.0 * (SEARCH_TILT_RAD - tilt_now)
+        sim_head.command(t + latency, search_dir * SEARCH_PAN_RAD_S,
+                         _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
+        return float(zoom_table.zoom_for_focal(SEARCH_FX_PX)), search_dir
+    if age > TARGET_TIMEOUT_S:
+        sim_head.command(t + latency, 0.0, 0.0)
+        return zoom, search_dir
+    point, pan_s, tilt_s = target.target
+    x, y, z = point
+    aim_pan = pan_s - math.atan2(x, z)
+    aim_tilt = tilt_s - math.atan2(y, math.hypot(x, z))
+    ff_pan = ff_tilt = 0.0
+    twist = odom.twist_at(t - 0.02) if odom is not None else None
+    if twist is not None:
+        try:
+            in_base = head.T_base_camera(pan_s, tilt_s).apply(np.array([point]))[0]
+            ff_pan, ff_tilt = feed_forward_rates(head, in_base, twist)
+        except ValueError:
+            pass
+    aim_pan, aim_tilt = head.clamp(aim_pan + ff_pan * age, aim_tilt + ff_tilt * age)
+    gain = 3.0
+    pan_rate = ff_pan + gain * _wrap(aim_pan - pan_now)
+    tilt_rate = ff_tilt + gain * (aim_tilt - tilt_now)
+    sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
+                     _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
+    distance = math.sqrt(x * x + y * y + z * z)
+    wanted = zoom_table.zoom_for_focal(0.25 * zoom_table.width * distance / card_size)
+    fx_now = zoom_table.camera_at(zoom).fx
+    fx_wanted = zoom_table.camera_at(wanted).fx
+    if math.hypot(_wrap(aim_pan - pan_now), aim_tilt - tilt_now) > math.radians(5.0):
+        wanted, fx_wanted = 0.0, zoom_table.camera_at(0.0).fx      # find it wide first
+    if abs(math.log(fx_wanted / fx_now)) > math.log(1.25):
+        zoom = float(wanted)
+    return zoom, search_dir
+
+
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _locate(frame, camera, stamp: float, localizer: RobotLocalizer, joints: JointStateBuffer,
             odom: OdomBuffer, bridge: OdomBridge, building, head: HeadGeometry,
-            sim_head: SimHead, world, T_building_odom: Pose, config: DriveCoreConfig
-            ) -> FrameRecord:
-    """Process one frame as the locator would; compare with the truth."""
+            sim_head: SimHead, world, T_building_odom: Pose, config: DriveCoreConfig,
+            chooser: Optional[TargetChooser] = None) -> FrameRecord:
+    """Process one frame as the locator would (its target too, given a chooser)."""
     truth = frame.truth
     true_pan, true_tilt = truth.pan, truth.tilt
     record = FrameRecord(stamp, truth.phase, truth.speed_m_s, truth.yaw_rate_rad_s, truth.room,
@@ -376,19 +464,35 @@ def _locate(frame, camera, stamp: float, localizer: RobotLocalizer, joints: Join
     record.calib = {'rates': (motion.pan_rate, motion.tilt_rate),
                     'rate_change': tuple(motion.rate_change), 'interval': motion.interval_s,
                     'hold': motion.hold_s}
-    odometry = None
-    if localizer.last_fix_stamp is not None:
-        odometry = odom.motion_between(localizer.last_fix_stamp, stamp)
-    twist = odom.twist_at(stamp)
+    odometry = twist = None
+    if config.odometry:
+        if localizer.last_fix_stamp is not None:
+            odometry = odom.motion_between(localizer.last_fix_stamp, stamp)
+        twist = odom.twist_at(stamp)
     result = localizer.process(frame.image, camera, motion.pan, motion.tilt, stamp, odometry,
                                motion, twist)
     fix = result.fix
     record.rejections = result.rejections
     blurs = dict(truth.blur_px)
+    if fix is not None and config.odometry:
+        bridge.update(fix, stamp)
+    if chooser is not None:
+        seen, _ = seen_cards(result, camera, building)
+        if config.gaze:
+            bridged = bridge.at(stamp) if config.odometry else None
+            last = localizer.last_fix
+            room = None if last is None else (last.ids.floor, last.ids.room)
+            choice = chooser.choose(stamp, seen, None if bridged is None else
+                                    bridged.T_frame_base, motion.pan, motion.tilt, twist,
+                                    room, camera)
+        else:
+            choice = biggest_seen(seen, 'gaze off')
+        record.target_source, record.target_reason = choice.source, choice.reason
+        if choice.point is not None:
+            record.target = (choice.point, motion.pan, motion.tilt)
     if fix is None:
         record.problem = result.no_fix_reason
         return record
-    bridge.update(fix, stamp)
     ids = fix.ids.as_tuple()
     record.ids = ids
     record.wrong_id = ids not in {v.ids.as_tuple() for v in truth.views}
@@ -589,6 +693,12 @@ def summarise(records: Sequence[FrameRecord], fix_age_s: float = 0.5) -> dict:
     for name in ('image', 'head_timing', 'head_interpolation', 'head_resolution', 'map'):
         sig[name] = _stats([r.sigmas.get(name) for r in fixes if r.sigmas])['median']
     out['term_sigma_median_m'] = sig
+    targets: Dict[str, int] = {}
+    for r in records:
+        for key in (r.target_source, r.target_reason):
+            if key:
+                targets[key] = targets.get(key, 0) + 1
+    out['targets'] = targets
     return out
 
 
@@ -627,6 +737,8 @@ def report(summary: dict, title: str) -> List[str]:
                  if v == v),
              f'  odom_bridged: error {_fmt_stats(s["bridge_error_m"])}, coverage_95 '
              f'{s["bridge_coverage_95"]:.3f}',
+             '  locator targets: ' + (', '.join(f'{k} {v}' for k, v in sorted(
+                 s['targets'].items())) or 'none (--driver planner)'),
              '  gates refused: ' + (', '.join(f'{k} {v}' for k, v in sorted(
                  s['rejections'].items())) or 'nothing')]
     return lines
@@ -654,6 +766,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                              "adapter's latency timer); the model's joint_stamp_sigma_s follows")
     parser.add_argument('--as-hung', action='store_true',
                         help='cards off their mapped pose (the map giving its std_dev)')
+    parser.add_argument('--driver', choices=DRIVERS, default='planner',
+                        help='planner: the driver aims with the gaze planner itself; target: '
+                             "a map-free driver centres the locator's target (as the nodes)")
+    parser.add_argument('--no-odometry', action='store_true',
+                        help="the locator takes no odometry (the gates' speed limits; no "
+                             'bridge, so no gaze)')
+    parser.add_argument('--no-gaze', action='store_true',
+                        help="the locator's target is the biggest card seen (--driver target)")
     parser.add_argument('--json', metavar='FILE', help='write the summaries as JSON')
     parser.add_argument('--centre-noise', type=int, metavar='VIEWS', default=0,
                         help="only measure the detector's dot-centre noise on VIEWS still "
@@ -696,7 +816,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             config = DriveCoreConfig(route=args.route, seconds=args.seconds,
                                      frame_rate_hz=args.rate, max_speed_m_s=args.max_speed,
                                      exposure=args.exposure, covariance=mode,
-                                     as_hung=args.as_hung, seed=seed, timing=timing)
+                                     as_hung=args.as_hung, seed=seed, timing=timing,
+                                     driver=args.driver, odometry=not args.no_odometry,
+                                     gaze=not args.no_gaze)
             records.extend(run(config, progress=True))
         elapsed = time.perf_counter() - start
         summary = summarise(records)
@@ -705,7 +827,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                   f', joint states {args.joint_hz:g} Hz late by <= {args.usb_latency_ms:g} ms')
         title = (f'{args.route}, seeds {",".join(map(str, seeds))}, {args.rate:g} fps, '
                  f'<= {args.max_speed:g} m/s, {args.exposure}{timing}'
-                 f'{", as hung" if args.as_hung else ""}: covariance {mode} '
+                 f'{", as hung" if args.as_hung else ""}, driver {args.driver}'
+                 f'{", no odometry" if args.no_odometry else ""}'
+                 f'{", no gaze" if args.no_gaze else ""}: covariance {mode} '
                  f'({elapsed:.0f} s)')
         print('\n'.join(report(summary, title)), flush=True)
     if args.json:

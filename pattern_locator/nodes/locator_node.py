@@ -10,7 +10,10 @@ Subscribes
     stamp, so each image uses the intrinsics of its own stamp: a zoom
     camera's change), ``camera/joint_states`` (sensor_msgs/JointState,
     reliable: ``camera_pan``/``camera_tilt``, used while
-    ``use_joint_states`` is true, else the fixed angles).
+    ``use_joint_states`` is true, else the fixed angles), ``odom``
+    (nav_msgs/Odometry, reliable, while ``use_odometry`` is true: the base's
+    motion since the last fix for the continuity gate, its twist for the
+    covariance, the bridge and the gaze).
 
 Publishes
     ``robot_location`` (geometry_msgs/PoseStamped: the base pose, the image's
@@ -19,8 +22,14 @@ Publishes
     ``robot_location/with_covariance``
     (geometry_msgs/PoseWithCovarianceStamped; transient local, depth 1, like
     AMCL's ``amcl_pose``: a late subscriber gets the last fix),
+    ``robot_location/odom_bridged`` (geometry_msgs/PoseWithCovarianceStamped:
+    the last fix carried forward by odometry, at the odometry's rate and
+    stamps, its covariance growing; robot_location's frame),
     ``pattern_locator/target`` (geometry_msgs/PointStamped: the centre of the
-    biggest card seen, in ``camera_optical_frame``, metres),
+    card the head should centre, in ``camera_optical_frame``, metres, the
+    image's stamp; chosen by the map-guided gaze from the bridged pose,
+    ``localization/target_choice.py``: the card as seen, or its centre
+    predicted at a handover; without odometry the biggest card seen),
     ``pattern_locator/debug_image`` (only drawn while someone subscribes) and
     ``/diagnostics``.
 
@@ -47,6 +56,7 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
@@ -60,11 +70,18 @@ from .ros_helpers import (all_finite, describe_values, fill_pose, Param, Paramet
                           ProblemLog, run_node, stamp_key, stamp_seconds, wall_timer)
 from ..card.pattern import load_pattern_config
 from ..errors import PatternLocatorError
-from ..localization.building import load_building
+from ..localization.building import BuildingMap, load_building
 from ..localization.gates import FOOTPRINTS, GateParameters
-from ..localization.head import angles_from_joint_state, HeadGeometry, JointStateBuffer
-from ..localization.localizer import FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotLocalizer
+from ..localization.gaze import GazeParameters
+from ..localization.head import (angles_from_joint_state, HeadGeometry, HeadMotion,
+                                 JointStateBuffer)
+from ..localization.localizer import (FrameResult, FUSION_MODES, OUTPUT_FRAMES, RobotFix,
+                                      RobotLocalizer)
+from ..localization.odom import BaseTwist, BridgedPose, covariance_from_ros, OdomBridge, OdomBuffer
+from ..localization.target_choice import biggest_seen, seen_cards, TargetChoice, TargetChooser
+from ..localization.uncertainty import TERMS, UncertaintyParameters
 from ..vision.camera import CameraModel
+from ..vision.geometry import Pose, rotation_from_quaternion
 from ..vision.locate import ESTIMATORS
 from ..vision.overlay import draw_overlay
 
@@ -81,6 +98,11 @@ MAX_BYTES_PER_PIXEL = 8
 # Frames above this many bytes leave big buffers behind: trim the heap when idle.
 LARGE_FRAME_BYTES = 4 * 1024 * 1024
 TIMES_KEPT = 200
+# Fixes over which the covariance terms' shares are given (their medians).
+SHARES_KEPT = 100
+# Odometry whose newest sample is this much older than an image has stopped:
+# the image does not wait for a newer one.
+ODOM_FLOWING_S = 1.0
 
 PARAMETERS: Tuple[Param, ...] = (
     Param('pattern_config', '', 'pattern YAML (empty: the shipped config/pattern.yaml)'),
@@ -119,6 +141,19 @@ PARAMETERS: Tuple[Param, ...] = (
           'looks up by it (deg)', -60.0, 60.0),
     Param('joint_margin_deg', 5.0, "joint states beyond the head's travel by more than this "
           'are refused', 0.0, 45.0),
+    Param('use_odometry', True, "take the base's motion from odom (nav_msgs/Odometry): the "
+          'continuity gate, the covariance of a moving base, odom_bridged and the gaze',
+          dynamic=True),
+    Param('odom_wait_s', 0.05, 'wait this long for an odometry sample newer than the image '
+          'before using the newest one', 0.0, 1.0, dynamic=True),
+    Param('odom_bridged', True, 'publish robot_location/odom_bridged: the last fix carried '
+          'forward by odometry, at the odometry rate', dynamic=True),
+    Param('odom_bridged_max_age_s', 60.0, 'odom_bridged stops when its fix is older than this '
+          '(s)', 0.1, 3600.0, dynamic=True),
+    Param('odom_bridged_max_sigma_m', 1.0, 'odom_bridged stops when its position standard '
+          'deviation exceeds this (m)', 0.01, 100.0, dynamic=True),
+    Param('use_gaze', True, 'choose the target with the map-guided gaze planner (gaze.*; it '
+          'needs odometry); false: the biggest card seen', dynamic=True),
 )
 
 # The output gates (localization/gates.py), one parameter each: a fix is
@@ -156,51 +191,106 @@ _GATE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
 }
 
 
-def _gate_parameters() -> Tuple[Param, ...]:
-    defaults = GateParameters()
+# The covariance model (localization/uncertainty.py), one parameter per term's size.
+_UNCERTAINTY_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
+    'pixel_sigma_px': ("the detector's dot-centre noise on still frames: the least pixel noise "
+                       'of a fix (px)', 0.0, 10.0),
+    'residual_factor': ("the estimator's error over its Fisher bound at the fit's own residual "
+                        'noise', 0.0, 10.0),
+    'blur_sigma_per_px': ('dot-centre noise added per pixel of predicted smear (px/px)', 0.0,
+                          1.0),
+    'exposure_s': ("the camera's shutter time, of each field when interlaced (s)", 0.0, 1.0),
+    'field_period_s': ("time between an interlaced frame's two fields; 0: a progressive camera "
+                       '(s)', 0.0, 0.1),
+    'joint_stamp_sigma_s': ("RMS error of the joint states' stamps against when the camera "
+                            'latched the angles (s)', 0.0, 1.0),
+    'image_stamp_sigma_s': ("RMS error of the images' stamps (s)", 0.0, 1.0),
+    'interpolation_factor': ('head angle error between joint states per change of rate times '
+                             'their interval', 0.0, 5.0),
+    'pan_step_rad': ("the head's pan resolution (rad; EVI-D31: 1/8.8 deg)", 0.0, 0.1),
+    'tilt_step_rad': ("the head's tilt resolution (rad; EVI-D31: 1/12 deg)", 0.0, 0.1),
+    'map_position_sigma_m': ('position standard deviation of cards whose map entry gives no '
+                             'std_dev (m)', 0.0, 10.0),
+    'map_rotation_sigma_deg': ('rotation standard deviation of cards whose map entry gives no '
+                               'std_dev (deg)', 0.0, 90.0),
+    'floor_position_m': ('position standard deviation added to every fix (m)', 0.0, 10.0),
+    'floor_rotation_deg': ('rotation standard deviation added to every fix (deg)', 0.0, 90.0),
+}
+
+# The map-guided gaze (localization/gaze.py): which card the target is.
+_GAZE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
+    'min_distance_m': ('a card nearer the head than this is not aimed at (m)', 0.0, 100.0),
+    'max_distance_m': ('a card farther from the head than this is not aimed at (m)', 0.1,
+                       100.0),
+    'max_view_angle_deg': ('a card seen further off its normal is not aimed at (deg)', 1.0,
+                           89.0),
+    'pan_margin_deg': ('aim only this far inside the pan travel (deg)', 0.0, 90.0),
+    'tilt_margin_deg': ('aim only this far inside the tilt travel (deg)', 0.0, 45.0),
+    'doorway_margin_m': ("outside every room's footprint but this close to some: a doorway, "
+                         'where both rooms count (m)', 0.0, 10.0),
+    'doorway_m': ('the first metres of a line of sight, where the robot stands, are not '
+                  'checked (m)', 0.0, 10.0),
+    'touch_m': ('rooms whose footprints are this close (along min_opening_m) are one space '
+                '(m)', 0.0, 10.0),
+    'min_opening_m': ('rooms touching along at least this are one space (m)', 0.0, 100.0),
+    'sight_step_m': ('step along a line of sight (m)', 0.01, 1.0),
+    'sight_clearance_m': ('lines of sight stay this far inside the footprints (m)', 0.0, 10.0),
+    'card_half_width_m': ("half a card's width: lines of sight go to its edges too (m)", 0.0,
+                          10.0),
+    'lookahead_s': ('hand over to the next card when the current one leaves the view within '
+                    'this, at the current twist (s)', 0.0, 60.0),
+    'switch_ratio': ('switch to another card when its score is below this times the current '
+                     "one's", 0.01, 1.0),
+    'view_weight': ('weight of obliquity in the score (distance x (1 + w (1 / cos(view) - 1)))',
+                    0.0, 100.0),
+    'slew_weight_m_per_rad': ('score added per radian the head must turn (m/rad)', 0.0, 100.0),
+}
+
+# Groups of parameters declared from a core's dataclass, one per field.
+PARAMETER_GROUPS = (('gates', GateParameters, _GATE_DESCRIPTIONS),
+                    ('uncertainty', UncertaintyParameters, _UNCERTAINTY_DESCRIPTIONS),
+                    ('gaze', GazeParameters, _GAZE_DESCRIPTIONS))
+
+
+def _group_parameters(prefix: str, cls: Any, descriptions: Dict[str, Tuple[str, Any, Any]]
+                      ) -> Tuple[Param, ...]:
+    defaults = cls()
     params = []
-    for field in dataclasses.fields(GateParameters):
-        description, low, high = _GATE_DESCRIPTIONS[field.name]
+    for field in dataclasses.fields(cls):
+        description, low, high = descriptions[field.name]
         default = getattr(defaults, field.name)
         if isinstance(low, tuple):
-            params.append(Param(f'gates.{field.name}', default, description, choices=low,
+            params.append(Param(f'{prefix}.{field.name}', default, description, choices=low,
                                 dynamic=True))
         elif isinstance(default, bool):
-            params.append(Param(f'gates.{field.name}', default, description, dynamic=True))
+            params.append(Param(f'{prefix}.{field.name}', default, description, dynamic=True))
         else:
-            params.append(Param(f'gates.{field.name}', float(default), description, low, high,
-                                dynamic=True))
+            params.append(Param(f'{prefix}.{field.name}', float(default), description, low,
+                                high, dynamic=True))
     return tuple(params)
 
 
-PARAMETERS = PARAMETERS + _gate_parameters()
+PARAMETERS = PARAMETERS + tuple(p for group in PARAMETER_GROUPS for p in _group_parameters(*group))
+
+
+def _group(values: Dict[str, Any], prefix: str) -> Dict[str, Any]:
+    return {name[len(prefix) + 1:]: value for name, value in values.items()
+            if name.startswith(prefix + '.')}
 
 
 def gate_parameters(values: Dict[str, Any]) -> GateParameters:
     """Return the gates' thresholds from the node's ``gates.*`` parameter values."""
-    return GateParameters(**{name[len('gates.'):]: value for name, value in values.items()
-                             if name.startswith('gates.')})
+    return GateParameters(**_group(values, 'gates'))
 
 
-def card_centre_from_homography(H: np.ndarray, camera: CameraModel) -> Optional[np.ndarray]:
-    """
-    Return a card centre's position in the optical frame (m) from its plane homography.
+def uncertainty_parameters(values: Dict[str, Any]) -> UncertaintyParameters:
+    """Return the covariance model's sizes from the node's ``uncertainty.*`` parameter values."""
+    return UncertaintyParameters(**_group(values, 'uncertainty'))
 
-    ``H`` maps the card plane (metres, centre at the origin) to undistorted
-    pixels: ``H ~ K [r1 r2 t]``, so ``t`` is ``K^-1 H``'s third column
-    scaled by the mean norm of the first two. None if it is degenerate.
-    """
-    try:
-        M = np.linalg.solve(camera.K, np.asarray(H, dtype=float))
-    except (np.linalg.LinAlgError, ValueError):
-        return None
-    scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
-    if not (math.isfinite(scale) and scale > 0.0):
-        return None
-    t = M[:, 2] / scale
-    if t[2] < 0.0:
-        t = -t
-    return t if all_finite(t) and t[2] > 0.0 else None
+
+def gaze_parameters(values: Dict[str, Any]) -> GazeParameters:
+    """Return the gaze planner's parameters from the node's ``gaze.*`` parameter values."""
+    return GazeParameters(**_group(values, 'gaze'))
 
 
 def rejection_reasons(result: FrameResult) -> Sequence[str]:
@@ -238,13 +328,15 @@ class LocatorNode(Node):
         super().__init__('locator', **kwargs)
         self.parameters = Parameters(self, PARAMETERS)
         p = self.parameters.values()
+        groups = tuple(prefix + '.' for prefix, _, _ in PARAMETER_GROUPS)
         self.get_logger().info('locator configuration: ' + describe_values(
-            {k: v for k, v in p.items() if not k.startswith('gates.')}))
-        self.get_logger().info('locator gates: ' + describe_values(
-            {k[len('gates.'):]: v for k, v in p.items() if k.startswith('gates.')}))
+            {k: v for k, v in p.items() if not k.startswith(groups)}))
+        for prefix, _, _ in PARAMETER_GROUPS:
+            self.get_logger().info(f'locator {prefix}: ' + describe_values(_group(p, prefix)))
         cv2.setNumThreads(int(p['opencv_threads']))
         self.pattern = load_pattern_config(p['pattern_config'] or None)
         building = load_building(p['building_map'] or None, self.pattern)
+        self.building: BuildingMap = building
         self.head = HeadGeometry(
             base_to_pan_xyz=tuple(p['head.base_to_pan_xyz']),
             pan_to_tilt_xyz=tuple(p['head.pan_to_tilt_xyz']),
@@ -254,10 +346,21 @@ class LocatorNode(Node):
             self.pattern, building, self.head, estimator=p['estimator'],
             output_frame=p['output_frame'], fusion=p['fusion'],
             min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'],
-            gates=gate_parameters(p))
+            gates=gate_parameters(p), uncertainty=uncertainty_parameters(p))
         self.joint_margin_rad = math.radians(p['joint_margin_deg'])
         self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'], head=self.head,
                                        margin_rad=self.joint_margin_rad)
+        # Odometry (executor thread adds, the worker reads; both thread-safe) and
+        # the last published fix carried forward by it, in the building frame.
+        self.odom = OdomBuffer(clock_jump_back_s=CLOCK_JUMP_S)
+        self.bridge = OdomBridge(self.odom, building, p['odom_bridged_max_sigma_m'],
+                                 p['odom_bridged_max_age_s'])
+        self._odom_arrived = threading.Condition()
+        # The room frame of the last published fix (odom_bridged's frame when
+        # output_frame is 'room') and its (floor, room), for the gaze.
+        self._fix_frame: Optional[str] = None
+        self._fix_room: Optional[Tuple[int, int]] = None
+        self.chooser = TargetChooser(building, self.head, gaze_parameters(p))
         self.settings: Dict[str, Any] = dict(p)
         # The worker holds this while it processes a frame; run-time
         # parameter changes take it to change the localizer between frames.
@@ -287,7 +390,16 @@ class LocatorNode(Node):
             for k in ('processing', 'joint_wait', 'queue', 'in_node')}
         self._stats_lock = threading.Lock()
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'located': 0,
-                      'refused_oversize': 0, 'clock_jumps': 0}
+                      'refused_oversize': 0, 'clock_jumps': 0, 'odom_received': 0,
+                      'located_with_odometry': 0, 'odom_bridged_published': 0}
+        # Per published fix: each covariance term's share of the position variance.
+        self._shares: 'collections.deque[Dict[str, float]]' = collections.deque(
+            maxlen=SHARES_KEPT)
+        self._position_sigmas: 'collections.deque[float]' = collections.deque(maxlen=SHARES_KEPT)
+        # Targets by source and by reason; the last choice.
+        self._target_counts: Dict[str, int] = collections.Counter()
+        self._last_target: Optional[TargetChoice] = None
+        self._bridge_state = 'no odometry yet'
 
         self.pub_pose = self.create_publisher(PoseStamped, 'robot_location', 10)
         self.pub_ids = self.create_publisher(UInt16MultiArray, 'robot_location/ids', 10)
@@ -296,6 +408,8 @@ class LocatorNode(Node):
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_cov = self.create_publisher(PoseWithCovarianceStamped,
                                              'robot_location/with_covariance', latched)
+        self.pub_bridged = self.create_publisher(PoseWithCovarianceStamped,
+                                                 'robot_location/odom_bridged', 10)
         self.pub_target = self.create_publisher(PointStamped, 'pattern_locator/target', 10)
         self.pub_debug = self.create_publisher(Image, 'pattern_locator/debug_image', 1)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
@@ -307,6 +421,9 @@ class LocatorNode(Node):
         # Joint states are reliable, as ROS publishes them (robot_state_publisher).
         self.create_subscription(JointState, 'camera/joint_states', self._on_joints,
                                  QoSProfile(depth=50))
+        # Odometry: reliable, as nav_msgs/Odometry publishers (diff drive
+        # controllers, robot_localization) publish it.
+        self.create_subscription(Odometry, 'odom', self._on_odom, QoSProfile(depth=50))
         wall_timer(self, 1.0, self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='locator-worker', daemon=True)
         self._worker.start()
@@ -335,9 +452,11 @@ class LocatorNode(Node):
 
     @staticmethod
     def _validate(values: Dict[str, Any]) -> Optional[str]:
-        # Ranges and choices are checked by Parameters; the gates also check
-        # their thresholds together (a minimum below its maximum).
+        # Ranges and choices are checked by Parameters; the groups also check
+        # their values together (a minimum below its maximum).
         gate_parameters(values)          # ConfigError: refused with its reason
+        uncertainty_parameters(values)
+        gaze_parameters(values)
         return None
 
     def _apply(self, changed: Dict[str, Any]) -> None:
@@ -353,6 +472,12 @@ class LocatorNode(Node):
             self.joints.max_age_s = float(s['joint_state_max_age_s'])
             if any(name.startswith('gates.') for name in changed):
                 self.localizer.gates.parameters = gate_parameters(s)
+            if any(name.startswith('uncertainty.') for name in changed):
+                self.localizer.uncertainty = uncertainty_parameters(s)
+            if any(name.startswith('gaze.') for name in changed):
+                self.chooser.set_gaze(gaze_parameters(s))
+            self.bridge.max_age_s = float(s['odom_bridged_max_age_s'])
+            self.bridge.max_position_sigma_m = float(s['odom_bridged_max_sigma_m'])
             if 'estimator' in changed or 'output_frame' in changed:
                 # A fix from the other estimator or frame is no prior for the next.
                 self.localizer.last_fix = None
@@ -437,6 +562,95 @@ class LocatorNode(Node):
         with self._joint_arrived:
             self._joint_arrived.notify_all()
 
+    def _on_odom(self, msg: Odometry) -> None:
+        with self._stats_lock:
+            self.stats['odom_received'] += 1
+        try:
+            stamp = stamp_seconds(msg.header.stamp)
+            pose = msg.pose.pose
+            q = (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
+            norm = math.sqrt(sum(v * v for v in q))
+            if not (math.isfinite(norm) and abs(norm - 1.0) <= 0.01):
+                raise PatternLocatorError(f'odometry: orientation is not a unit quaternion '
+                                          f'(norm {norm:.3g})')
+            T_odom_base = Pose(rotation_from_quaternion(np.array(q)),
+                               np.array([pose.position.x, pose.position.y, pose.position.z]))
+            linear, angular = msg.twist.twist.linear, msg.twist.twist.angular
+            twist = BaseTwist((linear.x, linear.y, linear.z), (angular.x, angular.y, angular.z))
+            span = self.odom.span
+            if span is not None and stamp < span[1] - CLOCK_JUMP_S:
+                # The clock went back (a replay): the fix carried forward is from the future.
+                self.bridge.reset()
+            self.odom.add(stamp, T_odom_base, covariance_from_ros(msg.pose.covariance), twist)
+        except PatternLocatorError as exc:
+            self.problems.report('odom', str(exc))
+            return
+        except Exception as exc:  # noqa: B902 - any field of a foreign message can be wrong
+            self.problems.report('odom', f'odometry: {type(exc).__name__}: {exc}')
+            return
+        with self._odom_arrived:
+            self._odom_arrived.notify_all()
+        self._publish_bridged(msg.header.stamp, stamp)
+
+    def _publish_bridged(self, ros_stamp: Any, stamp: float) -> None:
+        """Publish the last fix carried forward to an odometry sample's stamp (if it may be)."""
+        s = self.settings
+        if not (s['use_odometry'] and s['odom_bridged']):
+            self._bridge_state = 'off'
+            return
+        bridged = self.bridge.at(stamp)
+        if bridged is None:
+            self._bridge_state = self._why_not_bridged(stamp)
+            return
+        out = self._in_output_frame(bridged)
+        if out is None:
+            self._bridge_state = 'not published: non-finite pose or covariance'
+            self.problems.report('rejected: non-finite odom_bridged',
+                                 'odom_bridged not published: not finite')
+            return
+        frame_id, T, covariance = out
+        msg = PoseWithCovarianceStamped()
+        msg.header.stamp = ros_stamp
+        msg.header.frame_id = frame_id
+        fill_pose(msg.pose.pose, T)
+        msg.pose.covariance = [float(v) for v in covariance.ravel()]
+        self.pub_bridged.publish(msg)
+        sigma = math.sqrt(max(float(np.max(np.linalg.eigvalsh(covariance[:3, :3]))), 0.0))
+        self._bridge_state = f'publishing: fix {bridged.age_s:.1f} s old, sigma {sigma:.3f} m'
+        with self._stats_lock:
+            self.stats['odom_bridged_published'] += 1
+
+    def _why_not_bridged(self, stamp: float) -> str:
+        """Return why the bridge has no pose at ``stamp`` (for the diagnostics)."""
+        fix_stamp = self.bridge.fix_stamp_s
+        if fix_stamp is None:
+            return 'waiting for a fix'
+        if abs(stamp - fix_stamp) > self.bridge.max_age_s:
+            return (f'stopped: the fix is {stamp - fix_stamp:.1f} s old (limit '
+                    f'{self.bridge.max_age_s:g} s)')
+        if self.odom.motion_between(fix_stamp, stamp) is None:
+            return 'stopped: no odometry around the fix'
+        return (f'stopped: position sigma above {self.bridge.max_position_sigma_m:g} m')
+
+    def _in_output_frame(self, bridged: BridgedPose
+                         ) -> Optional[Tuple[str, Pose, np.ndarray]]:
+        """Return a bridged pose in robot_location's frame (the last fix's room, or building)."""
+        T, covariance, frame_id = bridged.T_frame_base, bridged.covariance, bridged.frame_id
+        room_frame = self._fix_frame
+        if self.settings['output_frame'] == 'room' and room_frame and room_frame != frame_id:
+            room = self.building.room_by_frame(room_frame)
+            R = room.T_building_room.R.T
+            J = np.zeros((6, 6))
+            J[:3, :3] = R
+            J[3:, 3:] = R
+            T = room.T_building_room.inverse() @ T
+            covariance = J @ covariance @ J.T
+            frame_id = room_frame
+        if not (all_finite(np.ravel(T.t)) and all_finite(np.ravel(T.R))
+                and all_finite(np.ravel(covariance))):
+            return None
+        return frame_id, T, covariance
+
     # Work (its own thread) ------------------------------------------------------------
 
     def _work(self) -> None:
@@ -481,16 +695,26 @@ class LocatorNode(Node):
                                  f'but the image is {msg.width}x{msg.height}')
             return
         image = image_from_msg(msg)          # a view of the message: the detector only reads
+        stamp = stamp_seconds(msg.header.stamp)
         waited = time.perf_counter()
-        angles = self._head_angles(msg)
+        motion = self._head_motion(msg)
+        if motion is not None:
+            self._wait_for_odometry(stamp)
         waited = time.perf_counter() - waited
         self._times['joint_wait'].append(waited * 1000.0)
-        if angles is None:
+        if motion is None:
             return
         with self._settings_lock:
-            result = self.localizer.process(image, camera, *angles,
-                                            stamp_s=stamp_seconds(msg.header.stamp))
-            self._publish(msg, result, image, camera)
+            odometry = twist = None
+            if self.settings['use_odometry']:
+                last = self.localizer.last_fix_stamp
+                if last is not None:
+                    odometry = self.odom.motion_between(last, stamp)
+                twist = self.odom.twist_at(stamp)
+            result = self.localizer.process(image, camera, motion.pan, motion.tilt, stamp,
+                                            odometry, motion, twist)
+            self._publish(msg, result, image, camera, motion, twist,
+                          odometry is not None)
         for problem, reason in zip(result.problems, rejection_reasons(result)):
             self.problems.report(f'rejected: {reason}', problem)
         done = time.perf_counter()
@@ -522,10 +746,12 @@ class LocatorNode(Node):
         self._info_synchronised = False
         return self.camera
 
-    def _head_angles(self, msg: Image) -> Optional[Tuple[float, float]]:
+    def _head_motion(self, msg: Image) -> Optional[HeadMotion]:
+        """Return the head's angles and rates at the image's stamp (None: not known)."""
         s = self.settings
         if not s['use_joint_states']:
-            return math.radians(s['fixed_pan_deg']), math.radians(s['fixed_tilt_deg'])
+            return HeadMotion.still(math.radians(s['fixed_pan_deg']),
+                                    math.radians(s['fixed_tilt_deg']))
         stamp = stamp_seconds(msg.header.stamp)
         # An image can overtake the joint state taken just after it: wait a
         # little for a sample on its far side rather than hold an old one.
@@ -551,54 +777,92 @@ class LocatorNode(Node):
                     break
                 self._joint_arrived.wait((short if covered else long) - now)
         try:
-            return self.joints.at(stamp)
+            return self.joints.motion_at(stamp)
         except PatternLocatorError as exc:
             self.problems.report('head angles', str(exc))
             return None
 
+    def _wait_for_odometry(self, stamp: float) -> None:
+        """
+        Wait up to ``odom_wait_s`` for an odometry sample at or after the image's stamp.
+
+        Only while odometry flows (its newest sample less than a second
+        before the image): without odometry nothing is waited for.
+        """
+        s = self.settings
+        if not s['use_odometry']:
+            return
+        deadline = time.monotonic() + float(s['odom_wait_s'])
+        with self._odom_arrived:
+            while True:
+                span = self.odom.span
+                if span is None or span[1] >= stamp or stamp - span[1] > ODOM_FLOWING_S:
+                    return
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0 or self._stopping:
+                    return
+                self._odom_arrived.wait(remaining)
+
     # Output ---------------------------------------------------------------------
 
-    def _target_point(self, result: FrameResult, camera: CameraModel
-                      ) -> Optional[np.ndarray]:
-        """Return the biggest card's centre in the optical frame (m), or None."""
-        if not result.detections:
-            return None
-        det = result.detections[0]
-        fix = result.fix
-        if fix is not None and fix.ids == det.ids and fix.size_px == det.size_px:
-            point = np.asarray(fix.T_camera_card.t, dtype=float)
-        else:
-            point = card_centre_from_homography(det.homography, camera)
-        if point is None or not all_finite(point) or point[2] <= 0.0:
-            return None
-        return point
+    def _choose_target(self, result: FrameResult, camera: CameraModel, motion: HeadMotion,
+                       stamp: float, twist: Optional[BaseTwist]) -> TargetChoice:
+        """Return the image's target: the gaze planner's card, else the biggest card seen."""
+        seen, biggest_lost = seen_cards(result, camera, self.building)
+        if biggest_lost:
+            self.problems.report('rejected: non-finite target',
+                                 'no target from the biggest card: its centre is not finite')
+        s = self.settings
+        if not s['use_gaze']:
+            self.chooser.reset()
+            return biggest_seen(seen, 'gaze off')
+        pose = None
+        if s['use_odometry']:
+            bridged = self.bridge.at(stamp)
+            if bridged is not None:
+                pose = bridged.T_frame_base
+        return self.chooser.choose(stamp, seen, pose, motion.pan, motion.tilt, twist,
+                                   self._fix_room, camera)
 
     def _publish(self, msg: Image, result: FrameResult, image: np.ndarray,
-                 camera: CameraModel) -> None:
+                 camera: CameraModel, motion: HeadMotion, twist: Optional[BaseTwist],
+                 with_odometry: bool) -> None:
         header = msg.header
-        point = self._target_point(result, camera)
-        if point is not None:
-            target = PointStamped()
-            target.header.stamp = header.stamp
-            target.header.frame_id = header.frame_id or 'camera_optical_frame'
-            target.point.x, target.point.y, target.point.z = (float(v) for v in point)
-            self.pub_target.publish(target)
-        elif result.detections:
-            self.problems.report('rejected: non-finite target',
-                                 'no target published: the card centre is not finite')
+        stamp = stamp_seconds(header.stamp)
+        fix = result.fix
+        if fix is not None:
+            covariance = np.asarray(fix.covariance, dtype=float)
+            ids = tuple(fix.ids.as_tuple())
+            problem = _unpublishable(fix, covariance, ids)
+            if problem:
+                self.problems.report(f'rejected: {problem}', f'fix not published: {problem}')
+                fix = None
+            else:
+                # Carried forward from here by odometry (odom_bridged, the gaze).
+                self.bridge.update(fix, stamp)
+                self._fix_frame = self.building.room(ids[0], ids[1]).frame
+                self._fix_room = (ids[0], ids[1])
+        choice = self._choose_target(result, camera, motion, stamp, twist)
+        self._count_target(choice)
+        if choice.point is not None:
+            if all_finite(choice.point):
+                target = PointStamped()
+                target.header.stamp = header.stamp
+                target.header.frame_id = header.frame_id or 'camera_optical_frame'
+                target.point.x, target.point.y, target.point.z = choice.point
+                self.pub_target.publish(target)
+            else:
+                self.problems.report('rejected: non-finite target',
+                                     'no target published: the card centre is not finite')
         if self.pub_debug.get_subscription_count() > 0:
             self._publish_debug(msg, result, image)
-        fix = result.fix
         if fix is None:
-            return
-        covariance = np.asarray(fix.covariance, dtype=float)
-        ids = tuple(fix.ids.as_tuple())
-        problem = _unpublishable(fix, covariance, ids)
-        if problem:
-            self.problems.report(f'rejected: {problem}', f'fix not published: {problem}')
             return
         with self._stats_lock:
             self.stats['located'] += 1
+            if with_odometry:
+                self.stats['located_with_odometry'] += 1
+        self._record_terms(fix)
         pose = PoseStamped()
         pose.header.stamp = header.stamp
         pose.header.frame_id = fix.frame_id
@@ -614,6 +878,23 @@ class LocatorNode(Node):
         self.pub_ids.publish(ids_msg)
         self.pub_cov.publish(with_cov)
         self.pub_pose.publish(pose)
+
+    def _count_target(self, choice: TargetChoice) -> None:
+        with self._stats_lock:
+            self._target_counts[choice.source] += 1
+            self._target_counts[choice.reason] += 1
+            self._last_target = choice
+
+    def _record_terms(self, fix: RobotFix) -> None:
+        """Keep each covariance term's share of a published fix's position variance."""
+        total = np.asarray(fix.covariance, dtype=float)[:3, :3]
+        trace = float(np.trace(total))
+        with self._stats_lock:
+            self._position_sigmas.append(math.sqrt(max(trace, 0.0)))
+            if fix.uncertainty is None or not trace > 0.0:
+                return
+            self._shares.append({name: float(np.trace(term[:3, :3])) / trace
+                                 for name, term in fix.uncertainty.terms.items()})
 
     def _publish_debug(self, msg: Image, result: FrameResult, image: np.ndarray) -> None:
         location = None
@@ -645,6 +926,9 @@ class LocatorNode(Node):
         values['last_problem'] = last
         values['estimator'] = self.localizer.locator.estimator
         values['output_frame'] = self.localizer.output_frame
+        values.update(self._odometry_values())
+        values.update(self._uncertainty_values())
+        values.update(self._target_values())
         for name, series in self._times.items():
             values.update(_timing(name, series))
         values.update({f'problems: {k}': v for k, v in sorted(counts.items())})
@@ -654,12 +938,55 @@ class LocatorNode(Node):
         array.status = [status]
         self.pub_diag.publish(array)
 
+    def _odometry_values(self) -> Dict[str, str]:
+        """Return the diagnostics of the odometry and of odom_bridged."""
+        span = self.odom.span
+        if not self.settings['use_odometry']:
+            state = 'off (use_odometry false)'
+        elif span is None:
+            state = 'none received'
+        else:
+            state = f'{len(self.odom)} samples over {span[1] - span[0]:.1f} s'
+        return {'odometry': state, 'odom_bridged': self._bridge_state}
+
+    def _uncertainty_values(self) -> Dict[str, str]:
+        """
+        Return each covariance term's median share of the position variance over recent fixes.
+
+        The shares of one fix add up to 1: the term with the largest share
+        is what limits the fixes (uncertainty.* sets its size).
+        """
+        with self._stats_lock:
+            shares = list(self._shares)
+            sigmas = sorted(self._position_sigmas)
+        values = {'position_sigma_mm_median': f'{1000.0 * sigmas[len(sigmas) // 2]:.2f}'
+                  if sigmas else 'n/a'}
+        for term in TERMS:
+            column = sorted(f.get(term, 0.0) for f in shares)
+            values[f'uncertainty_share_{term}'] = (f'{column[len(column) // 2]:.3f}'
+                                                   if column else 'n/a')
+        return values
+
+    def _target_values(self) -> Dict[str, str]:
+        """Return the last target's card, source and reason, and the counts of each."""
+        with self._stats_lock:
+            counts = dict(self._target_counts)
+            last = self._last_target
+        values = {'target_card': 'none' if last is None or last.ids is None
+                  else '/'.join(str(v) for v in last.ids),
+                  'target_source': 'n/a' if last is None else last.source,
+                  'target_reason': 'n/a' if last is None else last.reason,
+                  'gaze_excluded': ' '.join('/'.join(str(v) for v in ids)
+                                            for ids in self.chooser.excluded) or 'none'}
+        values.update({f'targets: {k}': str(v) for k, v in sorted(counts.items())})
+        return values
+
     def stop(self) -> None:
         """Stop the worker thread."""
         with self._wake:
             self._stopping = True
             self._wake.notify()
-        for condition in (self._joint_arrived, self._info_arrived):
+        for condition in (self._joint_arrived, self._info_arrived, self._odom_arrived):
             with condition:
                 condition.notify_all()
         self._worker.join(timeout=2.0)

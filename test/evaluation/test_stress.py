@@ -65,7 +65,8 @@ def test_tables_show_every_row_and_the_targets(rows):
 
 
 def test_peak_extra_memory_sees_a_native_allocation():
-    stress.exact_memory_accounting()
+    # 80 MB is above glibc's largest mmap threshold: no exact_memory_accounting()
+    # needed, which would change malloc for every later test in this process.
     peak = stress.peak_extra_mb(lambda: np.ones(10_000_000).sum())     # 80 MB
     assert np.isnan(peak) or 70 <= peak <= 200
 

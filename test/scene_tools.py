@@ -20,7 +20,7 @@ def base_pose(x: float, y: float, yaw_deg: float) -> Pose:
 
 
 def view(floor: int, room: int, T_room_base: Pose, pan: float, tilt: float, seed: int = 1,
-         camera: CameraModel = CAMERA):
+         camera: CameraModel = CAMERA, pattern=PATTERN):
     """Render what the head's camera sees of the room's cards; return (image, T_room_camera)."""
     T_room_camera = T_room_base @ HEAD.T_base_camera(pan, tilt)
     cards = []
@@ -28,7 +28,7 @@ def view(floor: int, room: int, T_room_base: Pose, pan: float, tilt: float, seed
         T_camera_card = T_room_camera.inverse() @ card.T_room_card
         if T_camera_card.t[2] <= 0.3:
             continue
-        cards.append(CardPlacement(T_camera_card, DotCardTexture(PATTERN, card.code),
-                                   code=card.code, config=PATTERN))
+        cards.append(CardPlacement(T_camera_card, DotCardTexture(pattern, card.code),
+                                   code=card.code, config=pattern))
     options = RenderOptions(noise_sigma=1.5, defocus_sigma_px=0.5, seed=seed)
     return render_scene(camera, cards, options).image, T_room_camera

@@ -1,5 +1,6 @@
 """The robot's place from one image: detection, map, head kinematics and fusion."""
 
+import dataclasses
 import math
 
 import cv2
@@ -149,10 +150,14 @@ def test_a_mirrored_card_is_never_located():
     # card printed without a handedness mark. Its mirror image (a reflection,
     # a flipped frame) puts the camera mirrored about the card's normal:
     # 2.6 m from the truth here, plausible on its own. Continuity refuses it.
+    unmarked = dataclasses.replace(PATTERN, handedness_mark=None)
     T_room_base = base_pose(4.0, 1.2, 160.0)
     pan, tilt = aim(T_room_base, BUILDING.card((0, 1, 1)).T_room_card.t)
-    image, _ = view(0, 1, T_room_base, pan, tilt)
+    image, _ = view(0, 1, T_room_base, pan, tilt, pattern=unmarked)
     mirrored = np.ascontiguousarray(cv2.flip(image, 1))
+
+    def localizer(**kwargs):
+        return RobotLocalizer(unmarked, BUILDING, HEAD, **kwargs)
 
     def run(loc, frames):
         out = []
@@ -178,6 +183,19 @@ def test_a_mirrored_card_is_never_located():
     assert np.linalg.norm(results[2].fix.T_frame_base.t - T_room_base.t) < 0.05
     counts = loc.rejection_counts()
     assert set(counts) == set(REASONS) and counts['unconfirmed_first'] == 2
+
+
+def test_a_mirrored_marked_card_gives_no_id_at_all():
+    # The shipped cards carry handedness marks: the detector itself refuses
+    # the mirror image, so the gates never see it.
+    T_room_base = base_pose(4.0, 1.2, 160.0)
+    pan, tilt = aim(T_room_base, BUILDING.card((0, 1, 1)).T_room_card.t)
+    image, _ = view(0, 1, T_room_base, pan, tilt)
+    mirrored = np.ascontiguousarray(cv2.flip(image, 1))
+    loc = localizer()
+    assert loc.process(image, CAMERA, pan, tilt).cards_seen == 1
+    result = loc.process(mirrored, CAMERA, pan, tilt)
+    assert result.fix is None and result.cards_seen == 0 and result.rejections == ()
 
 
 def test_without_a_stamp_every_plausible_fix_is_returned():

@@ -219,7 +219,9 @@ def test_bad_images_among_good_ones(scene, capfd):
 ])
 def test_bad_camera_file(scene, capfd, tmp_path, content, words):
     _, paths, _ = scene
-    camera = tmp_path / 'camera.yaml'
+    # A deep path, as a user's may be: the message names it whole.
+    camera = tmp_path / ('calibration_of_the_robot_head_camera_' * 3) / 'camera.yaml'
+    camera.parent.mkdir()
     if content is not None:
         camera.write_text(content)
     status = main(['detect', paths['one.png'], '--camera', str(camera), '--json'])

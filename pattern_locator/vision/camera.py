@@ -46,6 +46,7 @@ ROTATION_TOLERANCE = 1e-3             # R^T R = I and det R = 1 within this
 DISTORTION_FOV_FACTOR = 2.0           # ray angles at the border vs. without distortion
 BORDER_ROUND_TRIP_PX = 0.5            # undistort then distort the border: back within this
 NAME_CHARS = 80                       # a camera name from a message is cut to this
+SOURCE_CHARS = 300                    # where an error's source (a path) is cut
 MAX_FILE_BYTES = 64 * 1024            # a camera-info YAML is under 1 KB and 60 values
 MAX_FILE_VALUES = 2000
 
@@ -428,7 +429,11 @@ def camera_from_calibration(width: Any, height: Any, K: Any, D: Any = (),
     they are checked, not used). ``D`` empty = no distortion. Raises
     CameraError with one short line starting with ``source``.
     """
-    source = str(source)[:NAME_CHARS]
+    # A file path is shown whole (a user must find the file); only a source
+    # too long for one line (a foreign frame id, say) is cut, visibly.
+    source = str(source)
+    if len(source) > SOURCE_CHARS:
+        source = source[:SOURCE_CHARS - 3] + '...'
     name = str(name)[:NAME_CHARS] or 'camera'
     K = _real_array(np.ravel(K) if isinstance(K, np.ndarray) else K, 'camera_matrix K',
                     source)

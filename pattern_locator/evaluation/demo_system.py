@@ -436,8 +436,7 @@ def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: 
         'route': route, 'max_speed_m_s': max_speed_m_s, 'seed': seed, 'wall_s': round(wall, 1),
         'feed_forward': feed_forward, 'passed': passed, 'demo_targets': DEMO_TARGETS})
     print(f'\nverdict: {"PASS" if passed else "FAIL"} (the demo passes with no wrong id and '
-          "the coverage and errors above; the issue's targets need the map-guided gaze and "
-          f'the odometry in the locator)')
+          "the coverage and errors above; the issue's targets are the right-hand column)")
     print(f'plot: {plot}\nsummary: {summary}', flush=True)
     return 0 if passed else 1
 

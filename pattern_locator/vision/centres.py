@@ -285,7 +285,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
-                    core_margin, out)
+                    core_margin, out, refine)
     if not refine:
         return out
     blur = _blur(groups, U, major, minor, out.valid)
@@ -299,16 +299,19 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
                 paper: Paper, params: DetectorParams, core_margin: float,
-                out: SpotMeasures) -> None:
+                out: SpotMeasures, refine: bool = True) -> None:
     """Centroid in a generous window, and the tests of a dot, written into ``out``."""
     idx, s = g.index, g.scale
     pixels = g.pixels
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
-    dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
+    # Channel by channel: numpy's reduction over a last axis of three is slow.
+    dark = (pixels if pixels.ndim == 3 else np.minimum(np.minimum(
+        pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
     floor = np.maximum(0.04 * level, 2.0 * sigma)
-    weight = np.maximum((level - floor)[:, None, None] - dark, 0.0)
+    raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
+    weight = raw
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
     # On the card, inside its edge by two image pixels (blur carries what is
     # beyond onto it)...
@@ -349,15 +352,17 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     g.tests = {'whole': whole, 'dark': dark_enough, 'isolated': isolated, 'sized': sized}
     out.peak[idx] = relative
     out.area[idx] = equivalent
+    g.c, g.cell, g.window = c, cell, window
+    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+    if not refine:
+        return
     # Spread of each spot's darkness (image pixels^2), for the blur.
     total = np.maximum(mass, 1e-6)
     dx = g.X - c[:, 0, None, None].astype(np.float32)
     dy = g.Y - c[:, 1, None, None].astype(np.float32)
     g.spread = np.stack([(wd * dx * dx).sum(axis=(1, 2)), (wd * dx * dy).sum(axis=(1, 2)),
                          (wd * dy * dy).sum(axis=(1, 2))], axis=1) / total[:, None] * (s * s)
-    g.raw = np.maximum((level - floor)[:, None, None] - dark, 0.0) * g.in_image
-    g.c, g.cell, g.window = c, cell, window
-    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+    g.raw = raw * g.in_image
 
 
 def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
@@ -475,17 +480,20 @@ def _point_reflection(a: np.ndarray, c: np.ndarray, nearest: bool = False) -> np
     """
     k, s, _ = a.shape
     j = np.arange(s)
+    rows = np.arange(k)[:, None]
     out = a
     for axis, coord in ((1, c[:, 1]), (2, c[:, 0])):
         pos = 2.0 * coord[:, None] - j[None, :]                        # (K, S)
         base = np.floor(pos + (0.5 if nearest else 0.0)).astype(np.intp)
         shape = (k, s, 1) if axis == 1 else (k, 1, s)
+        # Whole rows (or columns, transposed) gathered from the window padded
+        # with a zero on each side: an index off the window reads a zero.
+        padded = np.zeros((k, s + 2, s), dtype=out.dtype)
+        padded[:, 1:s + 1] = out if axis == 1 else out.transpose(0, 2, 1)
 
-        def pick(index, src=out, shape=shape, axis=axis):
-            ok = ((index >= 0) & (index < s)).reshape(shape)
-            got = np.take_along_axis(src, np.broadcast_to(
-                np.clip(index, 0, s - 1).reshape(shape), src.shape), axis=axis)
-            return got * ok
+        def pick(index, padded=padded, axis=axis):
+            got = padded[rows, np.clip(index, -1, s) + 1]
+            return got if axis == 1 else got.transpose(0, 2, 1)
 
         if nearest:
             out = pick(base)
@@ -538,7 +546,9 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     for g in groups:
         idx = g.index
         k, size = g.pixels.shape[:2]
-        d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
+        # A lookup table per channel (OpenCV's LUT: one pass, no index arrays).
+        d = cv2.LUT(g.pixels.reshape(k * size, size, 3),
+                    table.reshape(256, 1, 3)).reshape(g.pixels.shape)           # (K, S, S, 3)
         # Where each channel's image of the dot is.
         w = np.maximum(d - 0.1, 0.0) * (g.cell & g.window & g.connected)[..., None]
         total = np.maximum(w.sum(axis=(1, 2)), 1e-6)                            # (K, 3)

@@ -43,6 +43,7 @@ from .camera import CameraModel
 from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
 from .dots import DotImage
+from .stats import median
 
 # Spots at least this big (semi-minor axis, image pixels) are measured on the
 # decimated image.
@@ -93,13 +94,13 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     d = np.arange(-1, 2)
     patch = dot_image.image[ys[:, None, None] + d[None, :, None],
                             xs[:, None, None] + d[None, None, :]].astype(np.float32)
-    white = np.median(patch[:, 1, 1], axis=0)
+    white = median(patch[:, 1, 1], axis=0)
     if np.max(white) < dot_image.params.min_white:
         return None
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
     # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(np.median(spread)) / 0.75)
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(median(spread)) / 0.75)
 
 
 @dataclass(frozen=True)
@@ -254,10 +255,10 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     und = apply_h(H, plane_xy)
     L = h_jacobian(H, plane_xy)                                # (n, 2, 2) px per metre
     if camera is not None and camera.has_distortion:
-        pred = camera.distort_pixels(und)
-        # The lens's local linear map, by differences of one pixel.
-        dx = camera.distort_pixels(und + [1.0, 0.0]) - pred
-        dy = camera.distort_pixels(und + [0.0, 1.0]) - pred
+        # The lens's local linear map, by differences of one pixel (one call).
+        pred, right, down = camera.distort_pixels(
+            np.vstack([und, und + [1.0, 0.0], und + [0.0, 1.0]])).reshape(3, n, 2)
+        dx, dy = right - pred, down - pred
         L = np.stack([dx, dy], axis=2) @ L
     else:
         pred = und
@@ -383,7 +384,7 @@ def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.nd
     sharp = np.column_stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c])
     if np.count_nonzero(valid) < 3:
         return 0.25 * np.eye(2)
-    xx, xy, yy = np.median(spread[valid] - sharp[valid], axis=0)
+    xx, xy, yy = median(spread[valid] - sharp[valid], axis=0)
     evals, evecs = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
     return evecs @ np.diag(np.clip(evals, 0.1, None)) @ evecs.T
 
@@ -441,7 +442,7 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     spread = np.sqrt(np.maximum((g.weight ** 2 * core).sum(axis=(1, 2)) / count - mean ** 2, 0))
     # Evenness against the dots that passed everything (same blur, same size).
     relative = spread / np.maximum(mean, 1e-6)
-    typical = np.median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
+    typical = median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
         else 0.0
     even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
     out.readable[idx] = out.valid[idx] | (exists & steady & even)
@@ -566,7 +567,7 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
         grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
         at = np.where(sure, g.c, g.pred)
         core = (g.ellipse(at, grown) <= 1.0) & g.cell & g.connected
-        out.colour[idx] = (smooth * core[..., None]).max(axis=(1, 2))
+        out.colour[idx] = (smooth * core[..., None]).reshape(k, size * size, 3).max(axis=1)
         # A dot read for its colour alone must be even in every channel
         # there, as the sure dots are: not half ink, half something else.
         doubtful = out.readable[idx] & ~out.valid[idx]
@@ -575,7 +576,7 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             mean = (d * core[..., None]).sum(axis=(1, 2)) / count
             var = (d * d * core[..., None]).sum(axis=(1, 2)) / count - mean ** 2
             spread = np.sqrt(np.maximum(var, 0.0)).max(axis=1)
-            typical = np.median(spread[out.valid[idx]]) if np.count_nonzero(
+            typical = median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
@@ -598,7 +599,7 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
     for c in (0, 2):
         both = out.valid & dark[:, c] & dark[:, 1]
         if np.count_nonzero(both) >= 3:
-            shift[c] = np.clip(np.median(channel_at[both, c] - channel_at[both, 1], axis=0),
+            shift[c] = np.clip(median(channel_at[both, c] - channel_at[both, 1], axis=0),
                                -limit, limit)
     if not np.any(shift):
         return

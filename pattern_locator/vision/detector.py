@@ -33,6 +33,7 @@ from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasure
 from .code_reading import handedness, read_code, Reading
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
+from .stats import median
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 
@@ -266,7 +267,7 @@ class Detector:
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:
             return False
-        return handedness(marks, float(np.median(black))) == 'ok'
+        return handedness(marks, float(median(black))) == 'ok'
 
 
 def _paper_points(config: PatternConfig) -> np.ndarray:

@@ -278,8 +278,10 @@ def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray
     scale, phase = scale[ok_scale], phase[ok_scale]
     dang = wrap(ang[None, :] - phase[:, None])                      # (A, N)
     dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
-    r_exp = scale[:, None, None] * ring_rho[None, None, :]          # (A, 1, R)
-    dr = np.min(np.abs(rho[None, :, None] / r_exp - 1.0), axis=2)  # (A, N)
+    # Off the nearest ring, ring by ring (a reduction over a short last axis is slow).
+    dr = np.abs(rho[None, :] / (scale * ring_rho[0])[:, None] - 1.0)        # (A, N)
+    for radius in ring_rho[1:]:
+        dr = np.minimum(dr, np.abs(rho[None, :] / (scale * radius)[:, None] - 1.0))
     on_ring = (dr < 0.2) & (dslot < 0.3)
     count = np.count_nonzero(on_ring, axis=1)
     # Soft agreement: a card's dots sit on their rings and slots to within a

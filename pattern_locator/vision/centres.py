@@ -162,10 +162,21 @@ class _Windows:
         size = 2 * half + 1
         self.base = np.round(centre).astype(np.intp) - half              # window origin
         j = np.arange(size)
-        xs = self.base[:, 0, None, None] + j[None, None, :]
-        ys = self.base[:, 1, None, None] + j[None, :, None]
-        self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-        self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
+        bx, by = self.base[:, 0], self.base[:, 1]
+        if len(bx) and bx.min() >= 0 and by.min() >= 0 and bx.max() <= w - size \
+                and by.max() <= h - size:
+            # Every window inside the image (the usual case): views of the
+            # image copied at once, no index arrays.
+            self.in_image = np.ones((len(bx), size, size), dtype=bool)
+            views = np.lib.stride_tricks.sliding_window_view(source, (size, size), axis=(0, 1))
+            picked = views[by, bx]                                       # (K, [3,] S, S)
+            self.pixels = np.ascontiguousarray(
+                picked if source.ndim == 2 else np.moveaxis(picked, 1, -1))
+        else:
+            xs = bx[:, None, None] + j[None, None, :]
+            ys = by[:, None, None] + j[None, :, None]
+            self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+            self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
         self.X = j.astype(np.float32)[None, None, :]
         self.Y = j.astype(np.float32)[None, :, None]
         self.axes = axes[index].astype(np.float32)
@@ -215,7 +226,8 @@ class _Windows:
         col = ((qx + layout.half) / layout.resolution).astype(np.intp)
         row = ((layout.half - qy) / layout.resolution).astype(np.intp)
         inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
-        owner = layout.owner[np.clip(row, 0, n - 1), np.clip(col, 0, n - 1)]
+        # One flat index into the raster: cheaper than a pair of index arrays.
+        owner = np.take(layout.owner.ravel(), np.clip(row, 0, n - 1) * n + np.clip(col, 0, n - 1))
         return inside & (owner == spot[:, None, None]), qx, qy
 
     def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:

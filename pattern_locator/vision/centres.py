@@ -168,10 +168,11 @@ class _Windows:
             # Every window inside the image (the usual case): views of the
             # image copied at once, no index arrays.
             self.in_image = np.ones((len(bx), size, size), dtype=bool)
-            views = np.lib.stride_tricks.sliding_window_view(source, (size, size), axis=(0, 1))
-            picked = views[by, bx]                                       # (K, [3,] S, S)
-            self.pixels = np.ascontiguousarray(
-                picked if source.ndim == 2 else np.moveaxis(picked, 1, -1))
+            # (y, x, row, column[, channel]): every window of the image, a view.
+            views = np.lib.stride_tricks.as_strided(
+                source, (h - size + 1, w - size + 1, size, size) + source.shape[2:],
+                source.strides[:2] + source.strides, writeable=False)
+            self.pixels = views[by, bx]                                  # (K, S, S[, 3])
         else:
             xs = bx[:, None, None] + j[None, None, :]
             ys = by[:, None, None] + j[None, :, None]

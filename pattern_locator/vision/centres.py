@@ -34,7 +34,7 @@ over the inner part of the dot at that shift, well clear of any neighbour.
 """
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import cv2
 import numpy as np
@@ -247,7 +247,8 @@ class _Windows:
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
-                  core_margin: Optional[float] = None, refine: bool = True) -> SpotMeasures:
+                  core_margin: Optional[float] = None, refine: bool = True,
+                  enough: Optional[Callable[[np.ndarray], bool]] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -258,6 +259,9 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     should be (default: the largest channel shift, plus one). ``refine=False``
     stops after the first, generous windows: enough to tell whether a spot
     is there (the handedness marks), not for a centre to fit to.
+    ``enough`` (given the spots valid after the first windows) stops there
+    when it says no: the refinement only ever drops spots, so a caller that
+    needs more than the first windows found needs nothing more.
     """
     params = dot_image.params
     if core_margin is None:
@@ -300,7 +304,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
                     core_margin, out, refine)
-    if not refine:
+    if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)
     for g in groups:

@@ -26,6 +26,7 @@ import numpy as np
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs
+from .stats import median
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.
@@ -135,11 +136,12 @@ def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarr
         if len(near) < MIN_NEIGHBOURS:
             continue
         a = blobs.area[near]
-        typical = np.median(a)
+        typical = median(a)
         alike = (a > typical / 1.6) & (a < typical * 1.6)
         du = blobs.u[near[alike]] - blobs.u[ci]
         octant = (np.floor((np.arctan2(dv[alike], du) + np.pi) / (np.pi / 4)).astype(int)) % 8
-        score[i] = min(np.count_nonzero(alike), 2 * RING_POINTS + 2) + 2 * len(set(octant))
+        octants = np.count_nonzero(np.bincount(octant, minlength=8))
+        score[i] = min(np.count_nonzero(alike), 2 * RING_POINTS + 2) + 2 * octants
     return score
 
 
@@ -248,8 +250,11 @@ def _assign(rel: np.ndarray, near: np.ndarray, ring_rho: np.ndarray) -> Optional
     cost = dr[np.arange(len(near)), ring] + dang
     ok = (dr[np.arange(len(near)), ring] < 0.25) & (dang < 0.35)
     slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
-    for i in np.flatnonzero(ok)[np.argsort(cost[ok])[::-1]]:
-        slot_blob[ring[i], k[i]] = near[i]          # the cheapest is written last
+    # Each slot to its cheapest neighbour: the first of the slot in cost order.
+    by_cost = np.flatnonzero(ok)[np.argsort(cost[ok])]
+    _, first = np.unique(ring[by_cost] * RING_POINTS + k[by_cost], return_index=True)
+    chosen = by_cost[first]
+    slot_blob[ring[chosen], k[chosen]] = near[chosen]
     per_ring = np.count_nonzero(slot_blob >= 0, axis=1)
     if per_ring.sum() < 8 or per_ring.max() < 5:
         return None
@@ -273,8 +278,10 @@ def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray
     scale, phase = scale[ok_scale], phase[ok_scale]
     dang = wrap(ang[None, :] - phase[:, None])                      # (A, N)
     dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
-    r_exp = scale[:, None, None] * ring_rho[None, None, :]          # (A, 1, R)
-    dr = np.min(np.abs(rho[None, :, None] / r_exp - 1.0), axis=2)  # (A, N)
+    # Off the nearest ring, ring by ring (a reduction over a short last axis is slow).
+    dr = np.abs(rho[None, :] / (scale * ring_rho[0])[:, None] - 1.0)        # (A, N)
+    for radius in ring_rho[1:]:
+        dr = np.minimum(dr, np.abs(rho[None, :] / (scale * radius)[:, None] - 1.0))
     on_ring = (dr < 0.2) & (dslot < 0.3)
     count = np.count_nonzero(on_ring, axis=1)
     # Soft agreement: a card's dots sit on their rings and slots to within a

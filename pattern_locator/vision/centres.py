@@ -34,7 +34,7 @@ over the inner part of the dot at that shift, well clear of any neighbour.
 """
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 import cv2
 import numpy as np
@@ -43,6 +43,7 @@ from .camera import CameraModel
 from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
 from .dots import DotImage
+from .stats import median
 
 # Spots at least this big (semi-minor axis, image pixels) are measured on the
 # decimated image.
@@ -93,13 +94,13 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     d = np.arange(-1, 2)
     patch = dot_image.image[ys[:, None, None] + d[None, :, None],
                             xs[:, None, None] + d[None, None, :]].astype(np.float32)
-    white = np.median(patch[:, 1, 1], axis=0)
+    white = median(patch[:, 1, 1], axis=0)
     if np.max(white) < dot_image.params.min_white:
         return None
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
     # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(np.median(spread)) / 0.75)
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(median(spread)) / 0.75)
 
 
 @dataclass(frozen=True)
@@ -161,10 +162,22 @@ class _Windows:
         size = 2 * half + 1
         self.base = np.round(centre).astype(np.intp) - half              # window origin
         j = np.arange(size)
-        xs = self.base[:, 0, None, None] + j[None, None, :]
-        ys = self.base[:, 1, None, None] + j[None, :, None]
-        self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-        self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
+        bx, by = self.base[:, 0], self.base[:, 1]
+        if len(bx) and bx.min() >= 0 and by.min() >= 0 and bx.max() <= w - size \
+                and by.max() <= h - size:
+            # Every window inside the image (the usual case): views of the
+            # image copied at once, no index arrays.
+            self.in_image = np.ones((len(bx), size, size), dtype=bool)
+            # (y, x, row, column[, channel]): every window of the image, a view.
+            views = np.lib.stride_tricks.as_strided(
+                source, (h - size + 1, w - size + 1, size, size) + source.shape[2:],
+                source.strides[:2] + source.strides, writeable=False)
+            self.pixels = views[by, bx]                                  # (K, S, S[, 3])
+        else:
+            xs = bx[:, None, None] + j[None, None, :]
+            ys = by[:, None, None] + j[None, :, None]
+            self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
+            self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
         self.X = j.astype(np.float32)[None, None, :]
         self.Y = j.astype(np.float32)[None, :, None]
         self.axes = axes[index].astype(np.float32)
@@ -214,7 +227,8 @@ class _Windows:
         col = ((qx + layout.half) / layout.resolution).astype(np.intp)
         row = ((layout.half - qy) / layout.resolution).astype(np.intp)
         inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
-        owner = layout.owner[np.clip(row, 0, n - 1), np.clip(col, 0, n - 1)]
+        # One flat index into the raster: cheaper than a pair of index arrays.
+        owner = np.take(layout.owner.ravel(), np.clip(row, 0, n - 1) * n + np.clip(col, 0, n - 1))
         return inside & (owner == spot[:, None, None]), qx, qy
 
     def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -233,7 +247,8 @@ class _Windows:
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
-                  core_margin: Optional[float] = None, refine: bool = True) -> SpotMeasures:
+                  core_margin: Optional[float] = None, refine: bool = True,
+                  enough: Optional[Callable[[np.ndarray], bool]] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -244,6 +259,9 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     should be (default: the largest channel shift, plus one). ``refine=False``
     stops after the first, generous windows: enough to tell whether a spot
     is there (the handedness marks), not for a centre to fit to.
+    ``enough`` (given the spots valid after the first windows) stops there
+    when it says no: the refinement only ever drops spots, so a caller that
+    needs more than the first windows found needs nothing more.
     """
     params = dot_image.params
     if core_margin is None:
@@ -254,10 +272,10 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     und = apply_h(H, plane_xy)
     L = h_jacobian(H, plane_xy)                                # (n, 2, 2) px per metre
     if camera is not None and camera.has_distortion:
-        pred = camera.distort_pixels(und)
-        # The lens's local linear map, by differences of one pixel.
-        dx = camera.distort_pixels(und + [1.0, 0.0]) - pred
-        dy = camera.distort_pixels(und + [0.0, 1.0]) - pred
+        # The lens's local linear map, by differences of one pixel (one call).
+        pred, right, down = camera.distort_pixels(
+            np.vstack([und, und + [1.0, 0.0], und + [0.0, 1.0]])).reshape(3, n, 2)
+        dx, dy = right - pred, down - pred
         L = np.stack([dx, dy], axis=2) @ L
     else:
         pred = und
@@ -285,8 +303,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
-                    core_margin, out)
-    if not refine:
+                    core_margin, out, refine)
+    if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)
     for g in groups:
@@ -299,16 +317,19 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
                 paper: Paper, params: DetectorParams, core_margin: float,
-                out: SpotMeasures) -> None:
+                out: SpotMeasures, refine: bool = True) -> None:
     """Centroid in a generous window, and the tests of a dot, written into ``out``."""
     idx, s = g.index, g.scale
     pixels = g.pixels
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
-    dark = (pixels if pixels.ndim == 3 else pixels.min(axis=-1)).astype(np.float32)
+    # Channel by channel: numpy's reduction over a last axis of three is slow.
+    dark = (pixels if pixels.ndim == 3 else np.minimum(np.minimum(
+        pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
     floor = np.maximum(0.04 * level, 2.0 * sigma)
-    weight = np.maximum((level - floor)[:, None, None] - dark, 0.0)
+    raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
+    weight = raw
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
     # On the card, inside its edge by two image pixels (blur carries what is
     # beyond onto it)...
@@ -349,15 +370,17 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     g.tests = {'whole': whole, 'dark': dark_enough, 'isolated': isolated, 'sized': sized}
     out.peak[idx] = relative
     out.area[idx] = equivalent
+    g.c, g.cell, g.window = c, cell, window
+    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+    if not refine:
+        return
     # Spread of each spot's darkness (image pixels^2), for the blur.
     total = np.maximum(mass, 1e-6)
     dx = g.X - c[:, 0, None, None].astype(np.float32)
     dy = g.Y - c[:, 1, None, None].astype(np.float32)
     g.spread = np.stack([(wd * dx * dx).sum(axis=(1, 2)), (wd * dx * dy).sum(axis=(1, 2)),
                          (wd * dy * dy).sum(axis=(1, 2))], axis=1) / total[:, None] * (s * s)
-    g.raw = np.maximum((level - floor)[:, None, None] - dark, 0.0) * g.in_image
-    g.c, g.cell, g.window = c, cell, window
-    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+    g.raw = raw * g.in_image
 
 
 def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
@@ -378,7 +401,7 @@ def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.nd
     sharp = np.column_stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c])
     if np.count_nonzero(valid) < 3:
         return 0.25 * np.eye(2)
-    xx, xy, yy = np.median(spread[valid] - sharp[valid], axis=0)
+    xx, xy, yy = median(spread[valid] - sharp[valid], axis=0)
     evals, evecs = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
     return evecs @ np.diag(np.clip(evals, 0.1, None)) @ evecs.T
 
@@ -436,7 +459,7 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     spread = np.sqrt(np.maximum((g.weight ** 2 * core).sum(axis=(1, 2)) / count - mean ** 2, 0))
     # Evenness against the dots that passed everything (same blur, same size).
     relative = spread / np.maximum(mean, 1e-6)
-    typical = np.median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
+    typical = median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
         else 0.0
     even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
     out.readable[idx] = out.valid[idx] | (exists & steady & even)
@@ -475,17 +498,20 @@ def _point_reflection(a: np.ndarray, c: np.ndarray, nearest: bool = False) -> np
     """
     k, s, _ = a.shape
     j = np.arange(s)
+    rows = np.arange(k)[:, None]
     out = a
     for axis, coord in ((1, c[:, 1]), (2, c[:, 0])):
         pos = 2.0 * coord[:, None] - j[None, :]                        # (K, S)
         base = np.floor(pos + (0.5 if nearest else 0.0)).astype(np.intp)
         shape = (k, s, 1) if axis == 1 else (k, 1, s)
+        # Whole rows (or columns, transposed) gathered from the window padded
+        # with a zero on each side: an index off the window reads a zero.
+        padded = np.zeros((k, s + 2, s), dtype=out.dtype)
+        padded[:, 1:s + 1] = out if axis == 1 else out.transpose(0, 2, 1)
 
-        def pick(index, src=out, shape=shape, axis=axis):
-            ok = ((index >= 0) & (index < s)).reshape(shape)
-            got = np.take_along_axis(src, np.broadcast_to(
-                np.clip(index, 0, s - 1).reshape(shape), src.shape), axis=axis)
-            return got * ok
+        def pick(index, padded=padded, axis=axis):
+            got = padded[rows, np.clip(index, -1, s) + 1]
+            return got if axis == 1 else got.transpose(0, 2, 1)
 
         if nearest:
             out = pick(base)
@@ -538,7 +564,9 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     for g in groups:
         idx = g.index
         k, size = g.pixels.shape[:2]
-        d = table[g.pixels, np.arange(3)]                                      # (K, S, S, 3)
+        # A lookup table per channel (OpenCV's LUT: one pass, no index arrays).
+        d = cv2.LUT(g.pixels.reshape(k * size, size, 3),
+                    table.reshape(256, 1, 3)).reshape(g.pixels.shape)           # (K, S, S, 3)
         # Where each channel's image of the dot is.
         w = np.maximum(d - 0.1, 0.0) * (g.cell & g.window & g.connected)[..., None]
         total = np.maximum(w.sum(axis=(1, 2)), 1e-6)                            # (K, 3)
@@ -556,7 +584,7 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
         grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
         at = np.where(sure, g.c, g.pred)
         core = (g.ellipse(at, grown) <= 1.0) & g.cell & g.connected
-        out.colour[idx] = (smooth * core[..., None]).max(axis=(1, 2))
+        out.colour[idx] = (smooth * core[..., None]).reshape(k, size * size, 3).max(axis=1)
         # A dot read for its colour alone must be even in every channel
         # there, as the sure dots are: not half ink, half something else.
         doubtful = out.readable[idx] & ~out.valid[idx]
@@ -565,7 +593,7 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             mean = (d * core[..., None]).sum(axis=(1, 2)) / count
             var = (d * d * core[..., None]).sum(axis=(1, 2)) / count - mean ** 2
             spread = np.sqrt(np.maximum(var, 0.0)).max(axis=1)
-            typical = np.median(spread[out.valid[idx]]) if np.count_nonzero(
+            typical = median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
@@ -588,7 +616,7 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
     for c in (0, 2):
         both = out.valid & dark[:, c] & dark[:, 1]
         if np.count_nonzero(both) >= 3:
-            shift[c] = np.clip(np.median(channel_at[both, c] - channel_at[both, 1], axis=0),
+            shift[c] = np.clip(median(channel_at[both, c] - channel_at[both, 1], axis=0),
                                -limit, limit)
     if not np.any(shift):
         return

@@ -28,6 +28,7 @@ import numpy as np
 
 from .centres import SpotMeasures
 from .detector_params import DetectorParams
+from .stats import median
 from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
 from ..errors import CodeError
 
@@ -94,7 +95,7 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     # Black is as dark as ink in every channel, as dark as the ring's coloured
     # dots are in their darkest channel: a grey object over a dot is no dot.
     coloured = ring_valid & (letter[rows] > 0)
-    ink = float(np.median(strength[rows[coloured]])) if np.any(coloured) else 0.0
+    ink = float(median(strength[rows[coloured]])) if np.any(coloured) else 0.0
     grey = ring_valid & (letter[rows] == 0) & (np.mean(colour[rows], axis=2) < 0.7 * ink)
     ring_valid = ring_valid & ~grey
     if not np.all(ring_valid.any(axis=0)):

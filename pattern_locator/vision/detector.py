@@ -33,6 +33,7 @@ from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasure
 from .code_reading import handedness, read_code, Reading
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
+from .stats import median
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 
@@ -188,7 +189,7 @@ class Detector:
         if paper is None:
             return None
         spots = measure_spots(dot_image, camera, H, self._dot_layout, self._dots, paper,
-                              colour=not dot_image.grey_only)
+                              colour=not dot_image.grey_only, enough=_refittable)
         H, valid = self._refit(spots, camera)
         if H is None:
             return None
@@ -240,7 +241,7 @@ class Detector:
     def _refit(self, spots: SpotMeasures, camera: Optional[CameraModel]):
         """Homography refitted to the measured dots; drops those off it. (None, None) if lost."""
         valid = spots.valid.copy()
-        if not valid[0] or np.count_nonzero(valid) < 7:
+        if not _refittable(valid):
             return None, None
         idx = np.flatnonzero(valid)
         # The centre last: fit_homography insists on it.
@@ -266,7 +267,12 @@ class Detector:
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:
             return False
-        return handedness(marks, float(np.median(black))) == 'ok'
+        return handedness(marks, float(median(black))) == 'ok'
+
+
+def _refittable(valid: np.ndarray) -> bool:
+    """Tell whether measured dots (``valid``, centre first) are enough to refit the homography."""
+    return bool(valid[0]) and np.count_nonzero(valid) >= 7
 
 
 def _paper_points(config: PatternConfig) -> np.ndarray:

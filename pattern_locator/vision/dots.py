@@ -263,8 +263,10 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     cols = one.shape[1] // 4 * 4
     if cols == 0:
         return False
-    t1 = one[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
-    t2 = two[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(axis=(1, 3))
+    # Tile sums: rows first (contiguous), then groups of four columns.
+    t1, t2 = (c[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols).sum(
+        axis=1, dtype=np.int32).reshape(rows // tile_rows, cols // 4, 4).sum(axis=2)
+        for c in (one, two))
     pixels = tile_rows * 4
     # A tile counts when its one-row curvature is strong (6 levels a pixel on
     # average) and three times its two-row curvature.

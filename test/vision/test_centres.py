@@ -99,3 +99,50 @@ def test_plane_layout_gives_each_place_its_nearest_dot_edge():
     row = int((LAYOUT.half - (CFG.ring_radii[0] + CFG.ring_dot_radius + 0.003))
               / LAYOUT.resolution)
     assert owner[row, n // 2] == CFG.dot_index(0, 1)
+
+
+def test_point_reflection_reflects_each_window_through_its_point():
+    from pattern_locator.vision.centres import _point_reflection
+
+    rng = np.random.default_rng(3)
+    k, s = 5, 9
+    a = rng.uniform(0, 1, (k, s, s)).astype(np.float32)
+    # Centres inside, on a pixel, half way, and near the edges.
+    c = np.array([[4.0, 4.0], [4.5, 3.25], [0.3, 7.9], [8.0, 0.0], [2.7, 5.1]])
+    bilinear, nearest = _point_reflection(a, c), _point_reflection(a, c, nearest=True)
+
+    def at(w, x, y):
+        return w[y, x] if 0 <= x < s and 0 <= y < s else 0.0
+
+    for i in range(k):
+        for y in range(s):
+            for x in range(s):
+                px, py = 2 * c[i, 0] - x, 2 * c[i, 1] - y
+                x0, y0 = int(np.floor(px)), int(np.floor(py))
+                fx, fy = px - x0, py - y0
+                want = ((1 - fy) * ((1 - fx) * at(a[i], x0, y0) + fx * at(a[i], x0 + 1, y0))
+                        + fy * ((1 - fx) * at(a[i], x0, y0 + 1) + fx * at(a[i], x0 + 1, y0 + 1)))
+                assert bilinear[i, y, x] == pytest.approx(want, abs=1e-6)
+                xn, yn = int(np.floor(px + 0.5)), int(np.floor(py + 0.5))
+                assert nearest[i, y, x] == at(a[i], xn, yn)
+
+
+def test_windows_inside_and_across_the_border_hold_the_image_pixels():
+    from pattern_locator.vision.centres import _Windows
+
+    image = np.random.default_rng(4).integers(0, 256, (60, 80, 3), dtype=np.uint8)
+    dot_image = segment(image, DetectorParams(field='frame'))
+    axes = np.tile(np.eye(2), (2, 1, 1))
+    semi = np.array([[3.0, 2.0], [3.0, 2.0]])
+    for pred in (np.array([[20.0, 30.0], [60.0, 10.0]]),      # both inside
+                 np.array([[20.0, 30.0], [78.0, 1.0]])):     # one across a corner
+        g = _Windows(dot_image, np.arange(2), 1, pred, axes, semi, axes)
+        size = g.pixels.shape[1]
+        for i in range(2):
+            for y in range(size):
+                for x in range(size):
+                    u, v = g.base[i, 0] + x, g.base[i, 1] + y
+                    inside = 0 <= u < 80 and 0 <= v < 60
+                    assert g.in_image[i, y, x] == inside
+                    if inside:
+                        assert np.array_equal(g.pixels[i, y, x], dot_image.image[v, u])

@@ -8,8 +8,9 @@ twice, with the driver's odometry feed-forward and without. The table gives,
 per run and over all runs: fix coverage, the error of the fixes while
 driving and at stops (median, p95, max), the time between the last fix of
 one card and the first of the next (handover), wrong ids and fixes of
-another room's card, ``coverage_95``, the card's angle off the optical axis
-in located images while the base turns (median, p95) and the VISCA traffic.
+another room's card, ``coverage_95``, the angle off the optical axis of the
+card the locator told the head to centre, in located images while the base
+turns (median, p95), and the VISCA traffic.
 The machine's load (load average over its cores, before and after) is
 printed with the table: ``--load N`` adds N busy processes for a loaded run.
 """
@@ -78,8 +79,8 @@ LEGEND = ('cov %: fix coverage (a fix younger than 0.5 s had arrived); errors: m
           'max of the base position; handover: last fix of a card to the first of the next; '
           "wrong: fixes of a card not in the image; other room: fixes of another room's "
           'card (through a door); cov95: fixes inside their own 95 % ellipsoid; off-axis '
-          "turning: the card's angle off the optical axis in located images while the base "
-          'turns (median/p95 deg, images)')
+          'turning: the angle off the optical axis of the card the head was told to centre, '
+          'in located images while the base turns (median/p95 deg, images)')
 
 
 def _table(rows: Sequence[Sequence[str]]) -> str:

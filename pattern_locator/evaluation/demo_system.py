@@ -405,7 +405,7 @@ def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: 
           f'{metrics.other_room}')
     if metrics.off_axis_deg.size:
         turning = metrics.off_axis_turning_deg
-        print(f'head: the located card off the optical axis while tracked: median '
+        print(f'head: the card it was told to centre, off the optical axis: median '
               f'{np.median(metrics.off_axis_deg):.2f} deg, p95 '
               f'{np.percentile(metrics.off_axis_deg, 95):.2f} deg; while the base turns '
               + (f'median {np.median(turning):.2f}, p95 {np.percentile(turning, 95):.2f} deg '

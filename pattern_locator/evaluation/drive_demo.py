@@ -27,8 +27,10 @@ that into :class:`DriveMetrics`:
   the last fix of the old and the first of the new;
 * the located card's angle off the true optical axis in images where the
   head has been on it for a second (fixes of the same card, none more than
-  0.5 s apart) and could centre it (within the head's travel), and those
-  while the base turns; VISCA traffic from the driver's diagnostics.
+  0.5 s apart), could centre it (within the head's travel) and was told to
+  (the locator's target of that image is this card, not the next one the
+  gaze already looks for), and those while the base turns; VISCA traffic
+  from the driver's diagnostics.
 """
 
 from dataclasses import dataclass, field
@@ -65,6 +67,9 @@ TURNING_RAD_S = 0.1
 COVERAGE_STEP_S = 0.05
 # Off-axis angles count once the head has been on a card this long (not its acquisition).
 SETTLED_S = 1.0
+# A target names the fix's card when it lies this close to the card's true centre
+# (the locator's measured centre is off by millimetres to centimetres).
+TARGET_MATCH_M = 0.3
 # The EVI-D31's travel (deg): a card beyond it cannot be centred (the gaze's job).
 PAN_TRAVEL_DEG = 100.0
 TILT_TRAVEL_DEG = 25.0
@@ -154,6 +159,13 @@ class DriveObserver:
         self.mispaired = 0
         self._rooms_by_frame = {}
         n.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 50)
+        # The locator's target per image stamp (the card centre in the optical frame,
+        # metres): which card the head was told to centre.
+        from geometry_msgs.msg import PointStamped
+        self.targets: Dict[int, np.ndarray] = {}
+        n.create_subscription(PointStamped, 'pattern_locator/target', lambda m: self.targets.
+                              __setitem__(self._key(m), np.array([m.point.x, m.point.y,
+                                                                  m.point.z])), 100)
         # (stamp ns, T_odom_base, 6x6 pose covariance) of every odometry message, if asked.
         self.odometry: List[Tuple[int, Pose, np.ndarray]] = []
         if odometry:
@@ -588,9 +600,17 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         if here is not None and (here.floor, here.room) != fix.ids[:2]:
             other_room += 1
         # The located card off the optical axis, in images where the head has been
-        # on it for a while (fixes of it, none more than 0.5 s apart, for 1 s) and
-        # could centre it (the card within the head's travel).
-        angle = _card_off_axis(world, building, truth, fix.ids)
+        # on it for a while (fixes of it, none more than 0.5 s apart, for 1 s), could
+        # centre it (the card within the head's travel) and was told to: the
+        # locator's target of that image is this card. (The gaze may already aim at
+        # the next card while this one still gives fixes at the edge of the view:
+        # that is a handover, not the head failing to follow.)
+        in_camera = _card_in_camera(world, building, truth, fix.ids)
+        angle = None if in_camera is None else math.degrees(
+            math.atan2(math.hypot(in_camera[0], in_camera[1]), in_camera[2]))
+        target = observer.targets.get(fix.stamp_ns)
+        targeted = bool(in_camera is not None and target is not None
+                        and np.linalg.norm(target - in_camera) <= TARGET_MATCH_M)
         joints = _card_joint_angles(world, truth, fix.ids)
         reachable = joints is not None and abs(joints[0]) <= PAN_TRAVEL_DEG and \
             abs(joints[1]) <= TILT_TRAVEL_DEG
@@ -599,8 +619,8 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
             track_start = fix.stamp_ns
         track_age = (fix.stamp_ns - track_start) * 1e-9
         record.update(off_axis_deg=angle, card_joint_deg=joints, reachable=reachable,
-                      track_age_s=round(track_age, 3))
-        if track_age >= SETTLED_S and reachable and angle is not None:
+                      track_age_s=round(track_age, 3), targeted=targeted)
+        if track_age >= SETTLED_S and reachable and targeted and angle is not None:
             off_axis.append(angle)
             if abs(yaw_rate) >= TURNING_RAD_S:
                 turning.append(angle)
@@ -708,9 +728,9 @@ def _card_joint_angles(world: FloorWorld, truth: TruthFrame, ids: Tuple[int, int
     return round(math.degrees(pan), 2), round(math.degrees(tilt), 2)
 
 
-def _card_off_axis(world: FloorWorld, building: BuildingMap, truth: TruthFrame,
-                   ids: Tuple[int, int, int]) -> Optional[float]:
-    """Return the angle (deg) between the true optical axis and the line to the card ``ids``."""
+def _card_in_camera(world: FloorWorld, building: BuildingMap, truth: TruthFrame,
+                    ids: Tuple[int, int, int]) -> Optional[np.ndarray]:
+    """Return the card ``ids``'s true centre in the optical frame (m), None if unknown."""
     if truth.T_room_camera is None:
         return None
     T_building_frame = _frame_pose(building, truth.camera_frame_id)
@@ -720,8 +740,7 @@ def _card_off_axis(world: FloorWorld, building: BuildingMap, truth: TruthFrame,
         return None
     if T_building_frame is None:
         return None
-    x, y, z = (T_building_frame @ truth.T_room_camera).inverse().apply(centre[None])[0]
-    return math.degrees(math.atan2(math.hypot(x, y), z))
+    return (T_building_frame @ truth.T_room_camera).inverse().apply(centre[None])[0]
 
 
 def _visca(diagnostics: List[Tuple[float, Dict[str, str]]]) -> Dict[str, float]:

@@ -35,7 +35,7 @@ demo: $(STAMP)
 	$(VENV)/bin/pattern-locator demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadgroup test
+	tools/run_tests.sh $(PY)
 
 lint: $(STAMP)
 	$(PY) -m pytest -q test/test_flake8.py test/test_pep257.py

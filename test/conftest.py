@@ -30,21 +30,3 @@ os.environ['ROS_DOMAIN_ID'] = str(_domain_id())
 # the project's profile makes room for them (see config/).
 os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE', str(
     Path(__file__).resolve().parent.parent / 'config' / 'fastdds_large_messages.xml'))
-
-
-def pytest_collection_modifyitems(config, items):
-    """
-    Keep every test that runs ROS processes on one xdist worker, one after another.
-
-    ``make test`` runs two workers (``-n 2 --dist loadgroup``): the ROS tests
-    (real node processes over DDS, each spinning up to three) share one
-    worker, the ROS-free tests run on the other. Two closed loops at once on
-    two cores would starve each other's nodes; one beside CPU-bound unit
-    tests does not.
-    """
-    import pytest
-    here = Path(__file__).resolve().parent
-    ros_dirs = {here / 'nodes', here / 'visca'}
-    for item in items:
-        if Path(str(item.fspath)).resolve().parent in ros_dirs:
-            item.add_marker(pytest.mark.xdist_group('ros'))

@@ -95,7 +95,7 @@ def time_plot(times: Dict[str, Sequence[float]], output_dir: str, kind: str,
     data = [np.maximum(np.asarray(times[k], dtype=float), 1e-3) for k in names]
     ax.set_xscale('log')
     if data:
-        ax.boxplot(data, vert=False, whis=(1, 99), widths=0.6, showfliers=True,
+        ax.boxplot(data, orientation='horizontal', whis=(1, 99), widths=0.6, showfliers=True,
                    flierprops={'markersize': 3, 'alpha': 0.5})
         ax.set_yticks(range(1, len(names) + 1))
         ax.set_yticklabels(names, fontsize=8)

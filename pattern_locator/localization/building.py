@@ -180,6 +180,23 @@ class BuildingMap:
         """Return every card, ordered by floor, room and card number."""
         return [self._by_ids[k] for k in sorted(self._by_ids)]
 
+    def mirror_pairs(self) -> List[Tuple[MappedCard, MappedCard]]:
+        """
+        Return the pairs of cards whose codes are each other's mirror images.
+
+        On cards printed without handedness marks a mirror image of one (a
+        glass door, thin paper against the light) reads as the other: only
+        the localizer's gates then stand between it and a wrong place.
+        """
+        pairs = []
+        for card in self.cards():
+            mirrored = card.code.mirrored()
+            other = self._by_code.get(mirrored)
+            if other is not None and mirrored != card.code and card.ids.as_tuple() < \
+                    other.ids.as_tuple():
+                pairs.append((card, other))
+        return pairs
+
     def room(self, floor: int, room: int) -> Room:
         """Return a room; CodeError if the map has no such room."""
         try:

@@ -337,6 +337,13 @@ class LocatorNode(Node):
         self.pattern = load_pattern_config(p['pattern_config'] or None)
         building = load_building(p['building_map'] or None, self.pattern)
         self.building: BuildingMap = building
+        pairs = building.mirror_pairs()
+        if self.pattern.handedness_mark is None and pairs:
+            shown = ', '.join(f'{a.label()} / {b.label()}' for a, b in pairs[:5])
+            self.get_logger().warn(
+                f'the cards carry no handedness marks and {len(pairs)} pair(s) of cards in the '
+                f'map are mirror images of each other ({shown}): a reflection of one reads as '
+                'the other, and only the gates (continuity, wall side) refuse it')
         self.head = HeadGeometry(
             base_to_pan_xyz=tuple(p['head.base_to_pan_xyz']),
             pan_to_tilt_xyz=tuple(p['head.pan_to_tilt_xyz']),

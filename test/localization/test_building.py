@@ -143,6 +143,19 @@ def test_lookup_by_ids_code_room_and_frame(building):
         building.room_by_frame('floor_9/room_9')
 
 
+def test_mirror_pairs_are_the_cards_a_reflection_confuses(building):
+    pairs = building.mirror_pairs()
+    # The paper's building holds one such pair (and self-mirrored codes, which are none).
+    assert [(a.code, b.code) for a, b in pairs] == \
+        [(a.code, a.code.mirrored()) for a, _ in pairs]
+    assert len(pairs) == 1
+    a, b = pairs[0]
+    assert a.code.mirrored() == b.code and b.code.mirrored() == a.code and a.code != b.code
+    for card in building.cards():
+        if card.code.mirrored() == card.code:
+            assert all(card not in pair for pair in pairs)
+
+
 # Orientation forms ----------------------------------------------------------------
 
 

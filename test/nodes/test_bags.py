@@ -380,6 +380,8 @@ def test_replays_deliver_every_image_five_times_in_a_row(locator, client):
         print(f'replay {k + 1} at {rate:g}x: {len(listener.poses)}/{n} located, worst '
               f'{100 * worst[0]:.2f} cm, {worst[1]:.3f} deg; diagnostics {delta}')
     text = locator.log.read_text()
+    # Unmarked cards and a map holding a code and its mirror image: said at start.
+    assert 'carry no handedness marks and 1 pair(s) of cards' in text, text[:3000]
     # The replays' time going back never cost an image its head angles.
     for warning in ('older than the joint state history', 'joint states stale',
                     'no joint states received', 'gap in joint states'):

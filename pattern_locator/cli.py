@@ -162,6 +162,12 @@ def _parser() -> argparse.ArgumentParser:
                        help='--drive: every seed with and without the odometry feed-forward')
     bench.add_argument('--load', type=_number_in(0, 64, int, '--load'), default=0,
                        help='--drive: add this many busy processes (a loaded machine)')
+    bench.add_argument('--building-map', metavar='PATH',
+                       help="--drive: the locator's map instead of config/floor_building.yaml "
+                            "(a surveyed one, with that map's room frames)")
+    bench.add_argument('--as-hung-seed', type=_number_in(0, 2 ** 31 - 1, int, '--as-hung-seed'),
+                       help='--drive: the sim hangs the cards off their mapped poses (up to 5 '
+                            'cm, 3 deg) with this seed')
     bench.set_defaults(handler=_bench)
 
     survey = sub.add_parser(
@@ -438,7 +444,8 @@ def _bench(args: argparse.Namespace) -> int:
                                route='short' if args.quick else args.route,
                                max_speed_m_s=args.max_speed,
                                compare_feed_forward=args.compare_feed_forward, load=args.load,
-                               output_dir=args.output_dir)
+                               output_dir=args.output_dir, building_map=args.building_map,
+                               as_hung_seed=args.as_hung_seed)
     if args.tracking:
         from .evaluation.bench_tracking import run_tracking_bench
         return run_tracking_bench()

@@ -13,6 +13,11 @@ card the locator told the head to centre, in located images while the base
 turns (median, p95), and the VISCA traffic.
 The machine's load (load average over its cores, before and after) is
 printed with the table: ``--load N`` adds N busy processes for a loaded run.
+``--as-hung-seed N`` hangs the sim's cards off their mapped poses (up to 5 cm
+and 3 degrees) and ``--building-map PATH`` gives the locator another map
+than ``config/floor_building.yaml`` (a surveyed one, ``survey_drive``): the
+judge takes the truth from the as-hung world and the locator's map only to
+place the fixes' frames.
 """
 
 from contextlib import contextmanager
@@ -23,11 +28,13 @@ from pathlib import Path
 import subprocess
 import sys
 import time
-from typing import Dict, Iterator, List, Sequence, Tuple
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from .drive_demo import DriveMetrics, DriveSetup, judge, run_drive, write_summary
+from ..errors import ConfigError
+from ..localization.building import BuildingMap, load_building
 from ..sim.floor_file import load_floor_world
 
 
@@ -120,15 +127,29 @@ def pooled(metrics: Sequence[DriveMetrics]) -> DriveMetrics:
 
 def run_drive_bench(runs: int = 3, seed: int = 1, route: str = 'loop',
                     max_speed_m_s: float = 0.5, compare_feed_forward: bool = False,
-                    load: int = 0, output_dir: str = 'out') -> int:
-    """Run the drive ``runs`` times (seeds ``seed``...); print the table; 0 if no wrong id."""
+                    load: int = 0, output_dir: str = 'out', building_map: Optional[str] = None,
+                    as_hung_seed: Optional[int] = None) -> int:
+    """
+    Run the drive ``runs`` times (seeds ``seed``...); print the table; 0 if no wrong id.
+
+    ``building_map``: the locator's map instead of ``config/floor_building.yaml``
+    (a surveyed one: it must keep that map's room frames). ``as_hung_seed``:
+    the sim hangs the cards off their mapped poses with this seed; the judge
+    takes the truth from that same world.
+    """
     out = Path(output_dir) / 'bench_drive'
-    world = load_floor_world()
+    world = load_floor_world(as_hung_seed=as_hung_seed)
+    locator_building = load_building(building_map) if building_map else None
+    if locator_building is not None:
+        _check_room_frames(locator_building, world)
     variants = [True, False] if compare_feed_forward else [True]
     print(f'bench --drive: route {route!r} of floor {world.floor} at up to {max_speed_m_s} '
           f'm/s, {runs} seed(s) from {seed}'
           + (', each with and without the odometry feed-forward' if compare_feed_forward
              else '') + f'; {load} busy process(es) added; logs in {out}/', flush=True)
+    print(f'locator map {building_map or "config/floor_building.yaml"}; cards '
+          + (f'as hung (seed {as_hung_seed})' if as_hung_seed is not None
+             else 'where the map says'), flush=True)
     print(f'before: {_load()}', flush=True)
     results: Dict[bool, List[DriveMetrics]] = {v: [] for v in variants}
     rows = []
@@ -139,12 +160,14 @@ def run_drive_bench(runs: int = 3, seed: int = 1, route: str = 'loop',
                 suffix = '' if len(variants) == 1 else (' ff' if ff else ' no ff')
                 name = f'seed {seed + k}{suffix}'
                 setup = DriveSetup(route=route, max_speed_m_s=max_speed_m_s, seed=seed + k,
-                                   feed_forward=ff)
+                                   feed_forward=ff, building_map=building_map or '',
+                                   as_hung_seed=-1 if as_hung_seed is None else as_hung_seed)
                 run_dir = out / name.replace(' ', '_')
                 observer = run_drive(run_dir, setup, progress=True)
-                metrics = judge(observer, world)
+                metrics = judge(observer, world, locator_building=locator_building)
                 write_summary(metrics, run_dir / 'drive_summary.json',
-                              {'seed': seed + k, 'feed_forward': ff, 'route': route})
+                              {'seed': seed + k, 'feed_forward': ff, 'route': route,
+                               'building_map': building_map, 'as_hung_seed': as_hung_seed})
                 results[ff].append(metrics)
                 rows.append(_row(name, metrics))
                 print(f'  {name}: {metrics.located} fixes, coverage '
@@ -166,3 +189,16 @@ def run_drive_bench(runs: int = 3, seed: int = 1, route: str = 'loop',
     print(f'per-run summaries: {path}', flush=True)
     wrong = sum(m.wrong_ids for ms in results.values() for m in ms)
     return 0 if wrong == 0 else 1
+
+
+def _check_room_frames(building: BuildingMap, world) -> None:
+    """Raise ConfigError unless the map has the world's rooms, frames and frame poses."""
+    for room in world.rooms:
+        key = (room.floor, room.room)
+        other = building.rooms.get(key)
+        if other is None or other.frame != room.frame or np.linalg.norm(
+                other.T_building_room.t - room.T_building_room.t) > 1e-6 or np.abs(
+                other.T_building_room.R - room.T_building_room.R).max() > 1e-9:
+            raise ConfigError(f'{building.source}: floor {key[0]} room {key[1]} is not the '
+                              f"floor map's room (frame {room.frame!r} at its pose): fixes in "
+                              'it could not be judged')

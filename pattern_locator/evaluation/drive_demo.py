@@ -47,7 +47,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import PatternLocatorError
-from ..localization.building import BuildingMap
+from ..localization.building import BuildingMap, load_building
 from ..localization.head import HeadGeometry
 from ..nodes.node_process import node_process
 from ..resources import config_path
@@ -276,6 +276,9 @@ class DriveSetup:
     namespace: str = ''
     driver_parameters: Tuple[str, ...] = ()
     locator_parameters: Tuple[str, ...] = ()
+    # The locator's building map ('': config/floor_building.yaml, the sim's own). A
+    # surveyed map (evaluation/survey_drive.py) must keep that map's room frames.
+    building_map: str = ''
 
 
 def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObserver:
@@ -299,8 +302,11 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
     timeout = setup.timeout_s or duration + 90.0
     context = Context()
     rclpy.init(context=context)
+    locator_map = setup.building_map or str(config_path('floor_building.yaml'))
+    # The observer pairs fixes with ids by the fix's frame: the locator's map names it.
     observer = DriveObserver(context, setup.namespace, setup.record_odometry, setup.sim_time,
-                             world.building)
+                             load_building(setup.building_map) if setup.building_map
+                             else world.building)
     sim_time = [] if not setup.sim_time else ['-p', 'use_sim_time:=true']
     # A SIGTERM (a CI's timeout, kill) ends the drive like Ctrl-C: the node
     # processes are stopped on the way out instead of being left running.
@@ -331,7 +337,7 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                     'search_tilt_levels_deg:=[10.0, 0.0]',
                     *setup.driver_parameters], setup.namespace, sim_time) as driver, \
                 node_process('locator_node', out / 'locator.log', [
-                    f'building_map:={config_path("floor_building.yaml")}',
+                    f'building_map:={locator_map}',
                     f'estimator:={setup.estimator}', f'head.mount_pitch_deg:={pitch}',
                     # Cards of a room are seen from the corridor through its door: the
                     # base is then outside the card's room but inside the building.
@@ -512,10 +518,19 @@ def _frame_pose(building: BuildingMap, frame_id: str) -> Optional[Pose]:
 
 
 def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
-          until_s: float = 0.0) -> DriveMetrics:
-    """Return the metrics of a drive (see the module docstring); ``until_s``: its first part."""
+          until_s: float = 0.0, locator_building: Optional[BuildingMap] = None
+          ) -> DriveMetrics:
+    """
+    Return the metrics of a drive (see the module docstring); ``until_s``: its first part.
+
+    ``world``: the truth (the sim's world, as hung if the sim hung it so).
+    ``locator_building``: the map the locator was given, if not the world's;
+    it places only the fixes' frames in the building, everything true (the
+    sim's camera frames, the cards) comes from the world.
+    """
     world = world if world is not None else load_floor_world()
     building = world.building
+    fix_building = locator_building if locator_building is not None else building
     window = observer.route_window()
     if window is not None and until_s > 0.0:
         window = (window[0], min(window[1], window[0] + int(until_s * 1e9)))
@@ -548,7 +563,7 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
     track_start = 0
     for fix in fixes:
         truth = frames.get(fix.stamp_ns)
-        T_building_frame = _frame_pose(building, fix.frame_id)
+        T_building_frame = _frame_pose(fix_building, fix.frame_id)
         if truth is None or truth.T_building_base is None or T_building_frame is None:
             continue
         judged.append(fix)

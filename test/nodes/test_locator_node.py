@@ -332,8 +332,10 @@ def test_diagnostics_report_processing_and_waiting_apart(locator, graph):
     for key in ('processing_ms_median', 'processing_ms_p95', 'joint_wait_ms_median',
                 'queue_ms_median', 'in_node_ms_median'):
         assert float(values[key]) >= 0.0, key
-    # Fixed head angles: nothing is waited for.
-    assert float(values['joint_wait_ms_max']) < 1.0
+    # Fixed head angles: nothing is waited for. A wait would last its whole
+    # joint_state_wait_s / odom_wait_s (50 ms each); what remains is the
+    # thread's scheduling on a busy machine (up to a few ms), not a wait.
+    assert float(values['joint_wait_ms_max']) < 20.0
 
 
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):

@@ -25,7 +25,7 @@ rows of the frame (:meth:`BoxRenderer.render_fields`).
 from dataclasses import dataclass, replace
 import functools
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import cv2
 import numpy as np
@@ -121,7 +121,7 @@ def _overlap(a: Box, b: Box) -> bool:
     return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
-def _merge_boxes(items: List[Tuple[Box, BoxCard]]) -> List[Tuple[Box, List[BoxCard]]]:
+def merge_boxes(items: List[Tuple[Box, Any]]) -> List[Tuple[Box, List[Any]]]:
     """Group cards whose boxes overlap (one render each, so the nearest card wins)."""
     groups = [(box, [card]) for box, card in items]
     merged = True
@@ -236,7 +236,7 @@ class BoxRenderer:
                             margin + blur / 2.0 + (1.0 if blur > 0 else 0.0))
             if box is not None:
                 items.append((box, card))
-        for box, group in _merge_boxes(items):
+        for box, group in merge_boxes(items):
             x0, y0, x1, y1 = box
             frame[y0:y1, x0:x1] = self._render_box(camera, box, group,
                                                    int(rng.integers(1 << 31)), width, height,

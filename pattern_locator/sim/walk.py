@@ -31,7 +31,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .render import CardPlacement, clip_in_front, DotCardTexture, render_scene, RenderOptions
+from .fast_render import merge_boxes, pixel_box, UncodedFace
+from .render import CardPlacement, DotCardTexture, render_scene, RenderOptions
 from ..card.pattern import Code, Ids, load_pattern_config, PatternConfig
 from ..errors import ConfigError
 from ..localization.building import load_building, wall_card_rotation
@@ -536,10 +537,10 @@ class WalkRenderer:
         margin = 4.0 * self.options.defocus_sigma_px + 3.0
         for k in self.visible(T_world_camera):
             T = T_camera_world @ self.plan.cards[k].T_true
-            box = _pixel_box(cam, T, self._textures[k].size / 2.0, margin)
+            box = pixel_box(cam, T, self._textures[k].size / 2.0, margin)
             if box is not None:
-                items.append((box, CardPlacement(T, _Face(self._textures[k]))))
-        for box, placements in _merge(items):
+                items.append((box, CardPlacement(T, UncodedFace(self._textures[k]))))
+        for box, placements in merge_boxes(items):
             x0, y0, x1, y1 = box
             K = cam.K.copy()
             K[0, 2] -= x0
@@ -551,45 +552,3 @@ class WalkRenderer:
                               seed=int(rng.integers(1 << 31)))
             frame[y0:y1, x0:x1] = render_scene(crop, placements, options).image
         return frame
-
-
-class _Face:
-    """A card face without dot truth (the slow part of a small render, unused here)."""
-
-    def __init__(self, texture: DotCardTexture) -> None:
-        self.size = texture.size
-        self.reflectance = texture.reflectance
-
-
-def _pixel_box(camera: CameraModel, T_camera_card: Pose, half: float, margin: float
-               ) -> Optional[Tuple[int, int, int, int]]:
-    corners = np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0],
-                        [-half, -half, 0.0]])
-    front = clip_in_front(T_camera_card.apply(corners))
-    if len(front) < 3:
-        return None
-    ideal = (front[:, :2] / front[:, 2:]) @ camera.K[:2, :2].T + camera.K[:2, 2]
-    low = np.floor(ideal.min(axis=0) - margin)
-    high = np.ceil(ideal.max(axis=0) + margin) + 1
-    x0, y0 = (int(max(v, 0)) for v in low)
-    x1, y1 = int(min(high[0], camera.width)), int(min(high[1], camera.height))
-    return (x0, y0, x1, y1) if x0 < x1 and y0 < y1 else None
-
-
-def _merge(items):
-    groups = [(box, [placement]) for box, placement in items]
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(groups)):
-            for j in range(i + 1, len(groups)):
-                a, b = groups[i][0], groups[j][0]
-                if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
-                    groups[i] = ((min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]),
-                                  max(a[3], b[3])), groups[i][1] + groups[j][1])
-                    del groups[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return groups

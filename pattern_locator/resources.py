@@ -15,7 +15,7 @@ exponentially: the "billion laughs").
 import os
 from pathlib import Path
 import stat
-from typing import Any, Dict, Type, Union
+from typing import Any, Dict, Tuple, Type, Union
 
 import yaml
 
@@ -53,14 +53,15 @@ def quote(text: Any, limit: int = QUOTE_CHARS) -> str:
     return shown if len(shown) <= limit else shown[:limit - 3] + '...'
 
 
-def read_file_bytes(path: Union[str, Path], what: str, max_bytes: int,
-                    error: Type[PatternLocatorError] = ConfigError) -> bytes:
+def open_regular_file(path: Union[str, Path], what: str,
+                      error: Type[PatternLocatorError] = ConfigError
+                      ) -> Tuple[int, os.stat_result]:
     """
-    Return a regular file's bytes, at most ``max_bytes``; ``error`` in one line if not.
+    Open a regular file read-only; return its descriptor (the caller closes it) and stat.
 
     Opened without blocking and checked with ``fstat`` on the open file, so a
     FIFO, a socket, a device or a directory is refused at once (and a file
-    swapped for one after a check cannot block either).
+    swapped for one after a check cannot block either): ``error`` in one line.
     """
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, 'O_CLOEXEC', 0))
@@ -73,6 +74,21 @@ def read_file_bytes(path: Union[str, Path], what: str, max_bytes: int,
         if not stat.S_ISREG(info.st_mode):
             kind = 'a FIFO' if stat.S_ISFIFO(info.st_mode) else 'not a regular file'
             raise error(f'{path}: cannot read {what} (is {kind})')
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, info
+
+
+def read_file_bytes(path: Union[str, Path], what: str, max_bytes: int,
+                    error: Type[PatternLocatorError] = ConfigError) -> bytes:
+    """
+    Return a regular file's bytes, at most ``max_bytes``; ``error`` in one line if not.
+
+    The file is opened as :func:`open_regular_file` does.
+    """
+    fd, info = open_regular_file(path, what, error)
+    try:
         if info.st_size > max_bytes:
             raise error(f'{path}: {what} is too large ({info.st_size} bytes; the limit is '
                         f'{max_bytes})')

@@ -22,7 +22,6 @@ import mmap
 import os
 from pathlib import Path
 import re
-import stat
 import struct
 import sys
 import tempfile
@@ -34,6 +33,7 @@ import cv2
 import numpy as np
 
 from ..errors import ImageError
+from ..resources import open_regular_file
 
 DEFAULT_MAX_PIXELS = 25_000_000          # a 6000 x 4000 photo; the CLI has an option
 FORMATS = ('PNG', 'JPEG', 'BMP', 'PNM', 'TIFF')
@@ -124,17 +124,8 @@ def _read_header(data: Union[bytes, mmap.mmap], name: str) -> ImageHeader:
 @contextlib.contextmanager
 def _mapped(name: str) -> Iterator[mmap.mmap]:
     """Map a regular file read-only (pages are read only when touched)."""
+    fd, info = open_regular_file(name, 'the image', ImageError)
     try:
-        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, 'O_CLOEXEC', 0))
-    except OSError as exc:
-        raise ImageError(f'{name}: cannot read the image ({exc.strerror or exc})') from None
-    try:
-        info = os.fstat(fd)
-        if stat.S_ISDIR(info.st_mode):
-            raise ImageError(f'{name}: cannot read the image (is a directory)')
-        if not stat.S_ISREG(info.st_mode):
-            kind = 'a FIFO' if stat.S_ISFIFO(info.st_mode) else 'not a regular file'
-            raise ImageError(f'{name}: cannot read the image (is {kind})')
         if info.st_size == 0:
             raise ImageError(f'{name}: the image file is empty')
         try:

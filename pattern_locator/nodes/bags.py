@@ -35,7 +35,6 @@ import numpy as np
 from rosbags.interfaces import QosDurability, QosReliability
 from rosbags.rosbag2 import (CompressionFormat, CompressionMode, Reader, ReaderError,
                              StoragePlugin, Writer, WriterError)
-from rosbags.typesys import get_typestore, Stores
 
 from .image_codec import encode_image
 from ..card.pattern import load_pattern_config
@@ -44,6 +43,7 @@ from ..localization.building import load_building
 from ..localization.head import HeadGeometry
 from ..sim.paper_setup import route
 from ..sim.render import CardPlacement, DotCardTexture, render_scene, RenderOptions
+from ..survey.bagio import typestore
 from ..vision.camera import CameraModel
 from ..vision.geometry import Pose, quaternion_xyzw, rodrigues
 
@@ -77,14 +77,6 @@ TEST_BAG_OPTIONS = {'rate_hz': 5.0, 'jpeg': True}
 PLAYER_DEPTH = 100
 # After the player saw its subscribers, the time it leaves them to see it.
 MATCH_GRACE_S = 0.3
-_TYPESTORE = None
-
-
-def _typestore():
-    global _TYPESTORE
-    if _TYPESTORE is None:
-        _TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-    return _TYPESTORE
 
 
 # Recording ---------------------------------------------------------------------------
@@ -166,7 +158,7 @@ def record_sim(out_dir: Union[str, Path], n_stops: int = 30, seed: int = 7,
     head = HeadGeometry()
     stops = sim_stops(n_stops, seed, head)
     frame = load_building().room(SIM_FLOOR, SIM_ROOM).frame
-    ts = _typestore()
+    ts = typestore()
     writer = Writer(out_dir, version=Writer.VERSION_LATEST, storage_plugin=StoragePlugin.MCAP)
     # STORAGE: zstd-compressed MCAP chunks, which rosbag2's own MCAP plugin reads.
     writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
@@ -289,7 +281,7 @@ def message_class(type_name: str):
 
 def _check_definition(topic: str, type_name: str, digest: str) -> None:
     """Refuse a recording whose message definition differs from the installed one."""
-    ts = _typestore()
+    ts = typestore()
     if not digest.startswith('RIHS01_') or type_name not in ts.types:
         return
     if ts.hash_rihs01(type_name) != digest:

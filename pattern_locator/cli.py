@@ -252,6 +252,31 @@ def _parser() -> argparse.ArgumentParser:
                            '(an unknown name lists the known ones)')
     fake.set_defaults(handler=_fake_camera)
 
+    layout = sub.add_parser(
+        'check-layout', help='where a route or a room has no card in view (before printing)',
+        description='From the building map alone (the gaze planner: range, view angle, the '
+                    "head's travel, line of sight within a room's space), print where a route "
+                    'has no card predicted visible, and per room the share of places and '
+                    'headings with one. Exit 1 when a route is blind longer than '
+                    '--max-blind-m.')
+    layout.add_argument('map', help='the building map (YAML)')
+    layout.add_argument('--route', action='append', default=[], metavar='FILE[:NAME]',
+                        help='a route: a YAML list of [x, y] (building frame), or '
+                             "{floor: N, waypoints: [...]}, or a sim floor file's route "
+                             '(config/sim_floor.yaml:loop); repeatable')
+    layout.add_argument('--floor', type=int, help="the floor (default: the route file's, or "
+                                                  "the map's only floor)")
+    layout.add_argument('--params', default=None, metavar='FILE',
+                        help="the locator's params file for the head's geometry and gaze.* "
+                             '(default: the shipped config/locator.yaml)')
+    layout.add_argument('--rooms', action='store_true',
+                        help='also sample every room on a grid (the default without --route)')
+    layout.add_argument('--step', type=_number_in(0.01, 5.0, what='--step'), default=0.1,
+                        help='route sampling step, m (default 0.1)')
+    layout.add_argument('--max-blind-m', type=_number_in(0.0, 1000.0, what='--max-blind-m'),
+                        default=1.0, help='longest blind stretch a route may have (default 1 m)')
+    layout.set_defaults(handler=_check_layout)
+
     demo = sub.add_parser('demo', help='the simulated robot drives through the floor '
                           '(make demo)',
                           description='Run sim, camera_driver and locator as processes over '
@@ -509,6 +534,13 @@ def _bag_play(args: argparse.Namespace) -> int:
                      discovery_timeout_s=args.wait_timeout, clock_hz=args.clock,
                      loops=0 if args.loop else 1, start_offset_s=args.start_offset,
                      delay_s=args.delay)
+
+
+def _check_layout(args: argparse.Namespace) -> int:
+    from .localization.layout_check import check_layout_main
+    from .resources import config_path
+    return check_layout_main(args.map, args.route, args.params or str(config_path('locator.yaml')),
+                             args.floor, args.step, args.max_blind_m, args.rooms)
 
 
 def _fake_camera(args: argparse.Namespace) -> int:

@@ -71,7 +71,7 @@ SURVEY_ROUTE = np.array(
     + [(1.1, 18.9), (1.1, 6.3), (3.5, 6.3), (23.7, 6.3), (23.7, 18.9), (1.1, 18.9),
        (1.1, 6.3), (3.5, 6.3)], dtype=float)
 # The anchors: the four corridor-end cards, at the corners of the loop.
-DEFAULT_ANCHORS = ((4, 9, 1), (4, 9, 2), (4, 11, 1), (4, 11, 2))
+DEFAULT_ANCHORS = ((4, 9, 1), (4, 13, 2), (4, 11, 1), (4, 14, 2))
 
 
 @dataclass(frozen=True, eq=False)

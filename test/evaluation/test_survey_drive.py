@@ -24,9 +24,10 @@ def surveyed():
 
 def test_the_surveyed_cards_are_within_a_few_centimetres_of_where_they_hang(surveyed):
     floor, building = surveyed
-    assert len(floor.world.cards) == 60
+    assert len(floor.world.cards) == len(floor.world.building.cards()) >= 60
     # All but at most two cards placed (a card seen once is left out, never guessed).
-    assert len(floor.errors) >= 58 and len(floor.missing) <= 2, floor.missing
+    assert len(floor.errors) >= len(floor.world.cards) - 2 and len(floor.missing) <= 2, \
+        floor.missing
     assert {e.ids for e in floor.errors} == {c.ids.as_tuple() for c in building.cards()}
     judged = [e for e in floor.errors if not e.anchor]
     assert len(judged) == len(floor.errors) - len(DEFAULT_ANCHORS)

@@ -33,7 +33,7 @@ def truly_visible(T_building_base, ids, pan, tilt):
 
 
 def test_the_corridors_are_one_space_and_the_rooms_are_not():
-    corridors = {(4, 9), (4, 10), (4, 11), (4, 12)}
+    corridors = {(4, 9), (4, 10), (4, 11), (4, 12), (4, 13), (4, 14)}
     for room in corridors:
         assert all(PLANNER.same_space(room, other) for other in corridors)
     # A 0.2 m wall between a room and the corridor (the map has no doors).
@@ -140,9 +140,11 @@ def test_keep_the_current_card_unless_another_is_much_better():
 
 
 def test_none_predicted_where_no_card_can_be_seen():
-    # In the south corridor between the sign (too close for the tilt) and the
-    # cards beyond the planner's range: the driver must search.
-    assert PLANNER.choose(pose(7.0, 6.3, 0.0)) is None
+    # In room 6, facing its door in the east wall: the cards on that wall are
+    # too close for the tilt, those on the side walls behind the pan's travel,
+    # and the corridor through the door is not the room's space: the driver
+    # must search.
+    assert PLANNER.choose(pose(22.3, 15.2, 0.0)) is None
     # Outside every room of the map.
     assert PLANNER.choose(pose(-5.0, -5.0, 0.0)) is None
     # On another floor's height.

@@ -116,10 +116,10 @@ def test_handover_to_the_next_card_before_the_current_one_leaves_the_view():
 
 
 def test_no_target_when_no_card_is_predicted_visible():
-    # In the south corridor between the sign (too close for the tilt) and the
-    # cards beyond the planner's range.
+    # In room 6, facing its door in the east wall (test_gaze: no card the head
+    # can reach is predicted visible).
     chooser = TargetChooser(BUILDING, HEAD)
-    T = pose(7.0, 6.3, 0.0)
+    T = pose(22.3, 15.2, 0.0)
     choice = chooser.choose(0.0, [], T, 0.0, 0.0, WEST, camera=CAMERA)
     assert (choice.point, choice.ids, choice.source, choice.reason) == (
         None, None, 'none', 'none predicted')

@@ -168,7 +168,7 @@ def test_joint_states_give_the_rates_and_their_change():
 
 
 @functools.lru_cache(maxsize=2)
-def rendered(as_hung: bool, count: int = 12):
+def rendered(as_hung: bool, count: int = 24):
     """Still frames along the loop: (image, camera, pan, tilt, true base pose)."""
     sim = FloorSim.floor('loop', seed=3, as_hung_seed=11 if as_hung else None)
     frames = []

@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 TABLE = ZoomTable.load()
-CORRIDORS = {9, 10, 11, 12}
+CORRIDORS = {9, 10, 11, 12, 13, 14}
 
 
 def test_the_floors_cards_load_from_the_building_map(floor_world):

@@ -457,6 +457,9 @@ class DriveMetrics:
     fix_time_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     # One dictionary per judged fix (route time, room, ids, error, sigma, motion, ...).
     records: List[Dict[str, Any]] = field(default_factory=list)
+    # The locator's last diagnostics: frames received, dropped and rejected (by
+    # reason), and its time per frame (queue, joint-state wait, processing).
+    locator: Dict[str, str] = field(default_factory=dict)
 
     def error_summary(self, mask: Optional[np.ndarray] = None) -> Dict[str, float]:
         """Return median, p95 and max of the errors (m), of the fixes in ``mask`` if given."""
@@ -492,6 +495,7 @@ class DriveMetrics:
             'off_axis_deg': stats(self.off_axis_deg),
             'off_axis_turning_deg': stats(self.off_axis_turning_deg),
             'latency_ms': stats(self.latency_ms), 'visca': self.visca,
+            'locator': self.locator,
             'rooms': {r.name: {'images': r.images, 'fixes': r.fixes,
                                'fix_coverage': clean(r.covered / r.samples if r.samples
                                                      else math.nan),
@@ -669,7 +673,18 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         unpaired=unpaired + observer.mispaired, track_time_s=(grid - begin) * 1e-9, fix_age_s=ages,
         true_xy=true_xy, fix_xy=np.array(fix_xy).reshape(-1, 2),
         wrong_xy=np.array(wrong_xy).reshape(-1, 2), fix_time_s=np.array(fix_times),
-        records=records)
+        records=records, locator=_locator_counts(observer.locator_diagnostics))
+
+
+# The locator's diagnostics that explain the coverage (the rest are its settings).
+_LOCATOR_KEYS = ('received', 'processed', 'dropped', 'located', 'rejected')
+
+
+def _locator_counts(values: Dict[str, str]) -> Dict[str, str]:
+    """Return the locator's frame counts, rejections by reason and stage times."""
+    return {k: v for k, v in values.items()
+            if k in _LOCATOR_KEYS or k.startswith(('gate_rejected_', 'problems: '))
+            or k.endswith(('_ms_median', '_ms_p95', '_ms_max'))}
 
 
 def _room_key(name: str) -> Tuple[int, str]:

@@ -240,7 +240,7 @@ class DriveObserver:
                 self.sim_status, self.sim_message = values, status.message
             elif status.name.startswith('camera_driver'):
                 self.driver_diagnostics.append((time.monotonic(), values))
-            elif status.name.startswith('locator'):
+            elif status.name.rsplit(': ', 1)[-1] == 'locator':     # 'pattern_locator: locator'
                 self.locator_diagnostics = values
 
     def route_window(self) -> Optional[Tuple[int, int]]:

@@ -42,6 +42,10 @@ def test_the_short_route_locates_the_robot_and_never_a_wrong_card(short_drive):
     # was misread): the sim's world, at the true camera pose, says which were.
     assert metrics.wrong_ids == 0
     assert metrics.unpaired == 0
+    # The locator's own counts and stage times reach the summary (what explains
+    # the coverage: frames dropped while busy, rejections, time per frame).
+    assert int(metrics.locator['received']) >= metrics.images // 2, metrics.locator
+    assert 'processing_ms_median' in metrics.locator, metrics.locator
     # Bounds the system meets today, with the margin a loaded 2-core machine
     # needs (the final targets, 95 % and 1/3/10 cm, need the map-guided
     # gaze and the locator's odometry): the head loses its card where the robot

@@ -299,7 +299,12 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument('--stops', type=int, default=30, help='paper-stops: route stops (1-30)')
     demo.add_argument('--dwell', type=float, default=2.5,
                       help='paper-stops: seconds at each stop')
-    demo.add_argument('--zoom', action='store_true', help='let the driver zoom on the card')
+    demo.add_argument('--zoom', action='store_true',
+                      help='paper-stops: let the driver zoom on the card (floor routes zoom '
+                           'unless --no-zoom)')
+    demo.add_argument('--no-zoom', action='store_true',
+                      help='floor routes: keep the camera at its widest (far cards then give '
+                           'fixes too uncertain for the demo)')
     demo.add_argument('--core', action='store_true',
                       help="no ROS: the core alone on the paper's own camera (f = 25 mm)")
     demo.add_argument('--seed', type=int, default=7,
@@ -556,7 +561,7 @@ def _demo(args: argparse.Namespace) -> int:
         from .evaluation.demo_system import run_floor_demo
         return run_floor_demo(route=args.route, max_speed_m_s=args.max_speed,
                               output_dir=args.output_dir, seed=args.seed,
-                              estimator=args.estimator, zoom_control=args.zoom,
+                              estimator=args.estimator, zoom_control=not args.no_zoom,
                               feed_forward=not args.no_feed_forward,
                               interlace=args.interlace)
     if not 1 <= args.stops <= 30:

@@ -373,7 +373,7 @@ DEMO_TARGETS = {'fix_coverage': 0.45, 'error_p95_m': 0.04, 'error_max_m': 0.20}
 
 
 def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: str = 'out',
-                   seed: int = 7, estimator: str = 'exact', zoom_control: bool = False,
+                   seed: int = 7, estimator: str = 'exact', zoom_control: bool = True,
                    feed_forward: bool = True, interlace: bool = False) -> int:
     """Drive a floor route with sim, camera_driver and locator; print, plot, write the summary."""
     from dataclasses import replace

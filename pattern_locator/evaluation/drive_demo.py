@@ -267,7 +267,7 @@ class DriveSetup:
     exposure_s: float = 0.02
     frame_rate_hz: float = 10.0
     estimator: str = 'exact'
-    zoom_control: bool = False
+    zoom_control: bool = True          # the driver zooms on its card (a far card's fix)
     timeout_s: float = 0.0            # 0: the route's duration plus a margin
     until_s: float = 0.0              # > 0: stop after this much route time
     camera_init_s: float = 1.0        # the emulated camera's power-up

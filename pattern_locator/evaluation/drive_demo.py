@@ -460,6 +460,8 @@ class DriveMetrics:
     # The locator's last diagnostics: frames received, dropped and rejected (by
     # reason), and its time per frame (queue, joint-state wait, processing).
     locator: Dict[str, str] = field(default_factory=dict)
+    # The sim's rendering time per frame (part of the latency, not the robot's).
+    sim_render: Dict[str, str] = field(default_factory=dict)
 
     def error_summary(self, mask: Optional[np.ndarray] = None) -> Dict[str, float]:
         """Return median, p95 and max of the errors (m), of the fixes in ``mask`` if given."""
@@ -495,7 +497,7 @@ class DriveMetrics:
             'off_axis_deg': stats(self.off_axis_deg),
             'off_axis_turning_deg': stats(self.off_axis_turning_deg),
             'latency_ms': stats(self.latency_ms), 'visca': self.visca,
-            'locator': self.locator,
+            'locator': self.locator, 'sim_render': self.sim_render,
             'rooms': {r.name: {'images': r.images, 'fixes': r.fixes,
                                'fix_coverage': clean(r.covered / r.samples if r.samples
                                                      else math.nan),
@@ -673,7 +675,9 @@ def judge(observer: DriveObserver, world: Optional[FloorWorld] = None,
         unpaired=unpaired + observer.mispaired, track_time_s=(grid - begin) * 1e-9, fix_age_s=ages,
         true_xy=true_xy, fix_xy=np.array(fix_xy).reshape(-1, 2),
         wrong_xy=np.array(wrong_xy).reshape(-1, 2), fix_time_s=np.array(fix_times),
-        records=records, locator=_locator_counts(observer.locator_diagnostics))
+        records=records, locator=_locator_counts(observer.locator_diagnostics),
+        sim_render={k: v for k, v in (observer.sim_status or {}).items()
+                    if k.startswith('render ms')})
 
 
 # The locator's diagnostics that explain the coverage (the rest are its settings).

@@ -324,16 +324,19 @@ class _Clock:
         self._msg = Clock()
         self._period = 1.0 / hz
         self._last = -math.inf
+        self._last_ns = -1
         # What rclcpp's ClockQoS offers: best effort, the newest only.
         self._pub = node.create_publisher(
             Clock, '/clock', QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
 
     def publish(self, bag_ns: int, force: bool = False) -> None:
+        """Publish ``bag_ns`` if a period has passed (or ``force``); /clock never goes back."""
         now = time.monotonic()
+        bag_ns = max(int(bag_ns), self._last_ns)
         if force or now - self._last >= self._period:
-            self._msg.clock.sec, self._msg.clock.nanosec = divmod(int(bag_ns), 10 ** 9)
+            self._msg.clock.sec, self._msg.clock.nanosec = divmod(bag_ns, 10 ** 9)
             self._pub.publish(self._msg)
-            self._last = now
+            self._last, self._last_ns = now, bag_ns
 
     def sleep_until(self, due: float, bag_ns_at: Callable[[float], int]) -> None:
         """Sleep until ``due`` (monotonic), publishing the bag time meanwhile."""
@@ -343,7 +346,9 @@ class _Clock:
                 return
             time.sleep(min(due - now, max(0.0, self._last + self._period - now) or
                            self._period))
-            self.publish(bag_ns_at(time.monotonic()))
+            # Woken late (a busy machine), the time is the next message's, not past
+            # it: that message's own stamp follows and /clock must not go back.
+            self.publish(bag_ns_at(min(time.monotonic(), due)))
 
 
 def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,

@@ -30,7 +30,10 @@ The conditions (all procedural, nothing downloaded):
 * ``far``: 5.5-8 m.
 
 Cards are at 1.25-4 m unless the condition says otherwise, tilted up to 60
-degrees, anywhere in the image.
+degrees, anywhere in the image. Our locator is given a building map per
+condition (:func:`stress_map`: the frames' cards and decoys one or two slots
+away), as the robot's locator is given its building's, so a card partly
+hidden by an object is completed only when exactly one mapped code fits.
 """
 
 from dataclasses import dataclass, field, replace

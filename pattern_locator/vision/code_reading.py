@@ -187,13 +187,14 @@ def code_table(codes: Iterable[Code]) -> np.ndarray:
     ``p``: slot ``k`` holds point ``(k - p) % 8 + 1``.
     """
     codes = sorted(set(codes), key=str)
-    table = np.zeros((len(codes), RING_POINTS, RING_POINTS + 1), dtype=np.int8)
+    index = {c: i for i, c in enumerate(LETTERS)}
+    letters = np.array([[index[c] for c in code.centre + code.ring] for code in codes],
+                       dtype=np.int8).reshape(len(codes), RING_POINTS + 1)
     k = np.arange(RING_POINTS)
-    for n, code in enumerate(codes):
-        ring = np.array([LETTERS.index(c) for c in code.ring])
-        for p in range(RING_POINTS):
-            table[n, p, :RING_POINTS] = ring[(k - p) % RING_POINTS]
-        table[n, :, RING_POINTS] = LETTERS.index(code.centre)
+    table = np.empty((len(codes), RING_POINTS, RING_POINTS + 1), dtype=np.int8)
+    for p in range(RING_POINTS):
+        table[:, p, :RING_POINTS] = letters[:, 1 + (k - p) % RING_POINTS]
+    table[:, :, RING_POINTS] = letters[:, :1]
     return table
 
 

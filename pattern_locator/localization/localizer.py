@@ -95,7 +95,10 @@ class RobotLocalizer:
         self.pattern = pattern
         self.building = building
         self.head = head
-        self.locator = CardLocator(pattern, estimator=estimator, min_tilt_deg=min_tilt_deg)
+        # The map's codes let the detector complete a card partly hidden by an
+        # object when exactly one mapped code fits what is seen.
+        self.locator = CardLocator(pattern, estimator=estimator, min_tilt_deg=min_tilt_deg,
+                                   known_codes=[card.code for card in building.cards()])
         self.output_frame = output_frame
         self.fusion = fusion
         self.max_reprojection_px = max_reprojection_px

@@ -62,6 +62,11 @@ class SpotMeasures:
     colour: np.ndarray      # (P, 3) per-channel darkness, linear, BGR (NaN if grey)
     area: np.ndarray        # (P,) equivalent area of the dot, pixels
     inside: np.ndarray      # (P,) window fully inside the image
+    partial: Optional[np.ndarray] = None    # (P,) colour read from an uncovered part only
+
+    def __post_init__(self) -> None:
+        if self.partial is None:
+            object.__setattr__(self, 'partial', np.zeros(len(self.valid), dtype=bool))
 
 
 @dataclass(frozen=True)
@@ -596,7 +601,61 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             typical = median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
+        _uncovered_part(g, smooth, major, minor, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
+
+
+def _uncovered_part(g: _Windows, smooth: np.ndarray, major: np.ndarray, minor: np.ndarray,
+                    out: SpotMeasures) -> None:
+    """
+    Colour of dots partly covered by an object, from the part of them that shows.
+
+    An object over the card hides part of some dots; their centres are lost
+    but the ink that shows still has its colour. The object's own colour
+    is what is dark where the card's paper should be round the dot; the
+    dot's ink is what, inside the dot (its inner part, clear of its blurred
+    rim), is as dark as the card's sure dots and far from that colour; of
+    that, only the part farthest from the object's colour (the pixels that
+    the blur has not mixed with it), and only when there is enough of it
+    and it is even. Such dots are marked ``partial``: the code reading asks
+    more of them (:func:`~.code_reading.read_code`).
+    """
+    idx = g.index
+    sure = out.valid[idx]
+    todo = ~out.readable[idx] & out.inside[idx] & (minor[idx] >= 2.5)
+    if np.count_nonzero(sure) < 3 or not np.any(todo):
+        return
+    ink = float(median(out.colour[idx][sure].max(axis=1)))
+    axes = np.column_stack([major[idx], minor[idx]]) / g.scale
+    ellipse = g.ellipse(g.pred, axes)
+    for j in np.flatnonzero(todo):
+        e, cell, b = ellipse[j], g.cell[j], axes[j, 1]
+        # Inside the dot clear of its blurred rim (a pixel and a half).
+        inner = cell & (e <= max((b - 1.5) / b, 0.4) ** 2)
+        # Where paper should be: round the dot beyond its blur, on the card.
+        ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
+        pix = smooth[j]                                       # (S, S, 3) darkness
+        strength = pix.max(axis=2)
+        if np.count_nonzero(inner) < 6:
+            continue
+        stain = ring & (strength > 0.15)
+        candidate = inner & (strength >= 0.6 * ink)
+        if np.count_nonzero(stain) >= 4:
+            other = median(pix[stain], axis=0)
+            away = np.linalg.norm(pix - other[None, None, :], axis=2)
+            candidate &= away >= 0.3 * ink
+            if np.any(candidate):
+                candidate &= away >= 0.8 * away[candidate].max()
+        n = np.count_nonzero(candidate)
+        if n < max(4, 0.2 * np.count_nonzero(inner)):
+            continue
+        chosen = pix[candidate]
+        mean = chosen.mean(axis=0)
+        if np.max(chosen.std(axis=0)) > 0.05 + 0.1 * mean.max():
+            continue
+        out.colour[idx[j]] = mean
+        out.readable[idx[j]] = True
+        out.partial[idx[j]] = True
 
 
 def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: float,

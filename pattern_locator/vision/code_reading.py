@@ -22,7 +22,7 @@ are where the card's marks must be dark and their mirror images paper.
 """
 
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -41,11 +41,15 @@ _CROSSTALK = np.linspace(0.0, 0.45, 7)
 class Reading:
     """The colours read from one card."""
 
-    point1_slot: int
-    code: Code
+    point1_slot: int                # -1 while unknown (a partial reading)
+    code: Optional[Code]            # None: some slots hidden, see ``slot_letters``
     margin: float                   # the smallest colour margin, 0..1
     ring_codes: Tuple[str, ...]     # per ring, the colours read ('?' = not seen)
     not_dots: Tuple[int, ...] = ()  # rows that were grey objects, not ink
+    # Per slot the letter read (K R G B), '?' where hidden; then the centre's.
+    slot_letters: str = ''
+    centre_letter: str = ''
+    slot_margins: Tuple[float, ...] = ()    # per slot (NaN where hidden), then the centre's
 
 
 def ink_darkness(config: PatternConfig) -> np.ndarray:
@@ -55,7 +59,8 @@ def ink_darkness(config: PatternConfig) -> np.ndarray:
 
 
 def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: PatternConfig,
-              params: DetectorParams, white: Optional[np.ndarray] = None) -> Optional[Reading]:
+              params: DetectorParams, white: Optional[np.ndarray] = None,
+              max_hidden: int = 0, partial: Optional[np.ndarray] = None) -> Optional[Reading]:
     """
     Read the code from dot colours in slot order (row 0 the centre, then ring r slot k).
 
@@ -63,11 +68,22 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     ``colour``); ``valid`` which dots were measured; ``white`` the card's
     paper as the camera gave it (BGR), whose colour is the light's. None
     when unsure.
+
+    Up to ``max_hidden`` slots may be unseen in both rings (an object over
+    the card). One hidden slot and seven coloured ones: the hidden one is
+    point 1 (the one black), and the code is whole. Otherwise the reading
+    is partial (``code`` None, ``slot_letters`` with '?' where hidden, and
+    ``point1_slot`` -1 when the black is hidden too): only a list of the
+    codes that exist can complete it (:func:`resolve_partial`).
+
+    ``partial`` marks dots whose colour was read from the part an object
+    left uncovered: a slot read from such dots alone must be read with
+    ``params.decisive_margin``, not the usual margin.
     """
     n_ring_dots = n_rings * RING_POINTS
     colour = np.asarray(colour, dtype=float)
     ring_valid = valid[1:1 + n_ring_dots].reshape(n_rings, RING_POINTS)
-    if not valid[0] or not np.all(ring_valid.any(axis=0)):
+    if not valid[0] or np.count_nonzero(~ring_valid.any(axis=0)) > max_hidden:
         return None             # the centre or a whole slot unseen: the code is unknown
     darkness = np.where(valid[:, None], colour, np.nan)
     strength = darkness.max(axis=1)
@@ -98,41 +114,127 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     ink = float(median(strength[rows[coloured]])) if np.any(coloured) else 0.0
     grey = ring_valid & (letter[rows] == 0) & (np.mean(colour[rows], axis=2) < 0.7 * ink)
     ring_valid = ring_valid & ~grey
-    if not np.all(ring_valid.any(axis=0)):
+    shown = ring_valid.any(axis=0)
+    if np.count_nonzero(~shown) > max_hidden:
         return None
     slot_letter = np.where(ring_valid, letter[rows], -1)
     agreed = slot_letter.max(axis=0)
     if np.any(ring_valid & (slot_letter != agreed[None, :])):
         return None             # the rings disagree: never guess
     black = np.flatnonzero(agreed == 0)
-    if len(black) != 1:
+    if len(black) > 1 or (len(black) == 0 and np.all(shown)):
         return None
-    point1 = int(black[0])
     # Each slot decided on the evidence of both rings: their dots' colour
     # directions averaged (a dot alone is noisier), with a margin.
-    slot_unit = np.where(ring_valid[:, :, None], unit[rows], 0.0).sum(axis=0)
+    slot_unit = np.where(ring_valid[:, :, None], unit[rows], 0.0).sum(axis=0)[shown]
     slot_unit /= np.linalg.norm(slot_unit, axis=1, keepdims=True)
     slot_pick, slot_margin = _classify(slot_unit, refs)
-    if np.any(slot_pick != agreed):
+    if np.any(slot_pick != agreed[shown]):
         return None
     margins = np.append(slot_margin, margin[0])
     if np.any(margins < params.min_colour_margin):
         return None
-    k_rows = rows[:, point1][ring_valid[:, point1]]
-    k_dark = float(np.mean(darkness[k_rows]))
+    if partial is not None:
+        sure = ring_valid & ~np.asarray(partial, bool)[rows]
+        weak = ~sure.any(axis=0)[shown]
+        if np.any(weak & (slot_margin < params.decisive_margin)):
+            return None
     centre = int(letter[0])
-    if centre == 0 and float(np.mean(darkness[0])) < 0.8 * k_dark:
-        return None
+    if len(black):
+        k_rows = rows[:, black[0]][ring_valid[:, black[0]]]
+        k_dark = float(np.mean(darkness[k_rows]))
+        if centre == 0 and float(np.mean(darkness[0])) < 0.8 * k_dark:
+            return None
+    elif centre == 0:
+        return None             # a black centre needs point 1 to compare with
+    hidden = np.flatnonzero(~shown)
+    if len(black) == 0 and len(hidden) == 1:
+        # Seven coloured slots: the hidden one is the black, point 1.
+        black, agreed = hidden, np.where(shown, agreed, 0)
+    letters = ''.join(LETTERS[a] if a >= 0 else '?' for a in agreed)
+    per_slot = np.full(RING_POINTS, np.nan)
+    per_slot[shown] = slot_margin
+    per_slot = tuple(float(m) for m in np.append(per_slot, margin[0]))
+    not_dots = tuple(int(r) for r in rows[grey])
+    if len(black) == 0 or np.any(agreed < 0):
+        # Partial: the rings' letters in slot order (turned once point 1 is known).
+        return Reading(int(black[0]) if len(black) else -1, None, float(np.min(margins)),
+                       ring_codes(slot_letter, 0), not_dots, letters, LETTERS[centre],
+                       per_slot)
+    point1 = int(black[0])
     slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
     text = LETTERS[centre] + '-' + 'K' + ''.join(LETTERS[agreed[k]] for k in slots[1:])
     try:
         code = Code.parse(text)
     except CodeError:
         return None
-    ring_codes = tuple(''.join(LETTERS[slot_letter[r, k]] if slot_letter[r, k] >= 0 else '?'
-                               for k in slots) for r in range(n_rings))
-    return Reading(point1, code, float(np.min(margins)), ring_codes,
-                   tuple(int(r) for r in rows[grey]))
+    return Reading(point1, code, float(np.min(margins)), ring_codes(slot_letter, point1),
+                   not_dots, letters, LETTERS[centre], per_slot)
+
+
+def ring_codes(slot_letter: np.ndarray, point1: int) -> Tuple[str, ...]:
+    """Per ring, the letters read (``slot_letter``: (rings, 8), -1 unseen) from point 1 on."""
+    slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
+    return tuple(''.join(LETTERS[row[k]] if row[k] >= 0 else '?' for k in slots)
+                 for row in np.asarray(slot_letter))
+
+
+def code_table(codes: Iterable[Code]) -> np.ndarray:
+    """
+    Return known codes as letter indices (N, 8, 9): slots then centre, per point-1 slot.
+
+    Row ``[n, p]`` is what the card of code ``n`` shows with point 1 in slot
+    ``p``: slot ``k`` holds point ``(k - p) % 8 + 1``.
+    """
+    codes = sorted(set(codes), key=str)
+    index = {c: i for i, c in enumerate(LETTERS)}
+    letters = np.array([[index[c] for c in code.centre + code.ring] for code in codes],
+                       dtype=np.int8).reshape(len(codes), RING_POINTS + 1)
+    k = np.arange(RING_POINTS)
+    table = np.empty((len(codes), RING_POINTS, RING_POINTS + 1), dtype=np.int8)
+    for p in range(RING_POINTS):
+        table[:, p, :RING_POINTS] = letters[:, 1 + (k - p) % RING_POINTS]
+    table[:, :, RING_POINTS] = letters[:, :1]
+    return table
+
+
+def resolve_partial(reading: Reading, codes: Sequence[Code], table: np.ndarray,
+                    decisive_margin: float = np.inf) -> Optional[Tuple[Code, int]]:
+    """
+    Complete a partial reading from the codes that exist; (code, point-1 slot) or None.
+
+    A hypothesis is a known code with point 1 in one slot (``table``:
+    :func:`code_table` of ``codes``, ``codes`` in its row order,
+    ``sorted(set(codes), key=str)``). One is taken only when:
+
+    * it is the only one that agrees with every seen slot and the centre
+      (each read with the usual margin by :func:`read_code`);
+    * every other hypothesis (every other known code in every turn, and
+      this code in any other turn) disagrees with the reading in at least
+      two seen slots, or in one slot read with at least
+      ``decisive_margin`` (default: two slots always): a single slot
+      misread at the usual margin could then not have made the answer.
+    """
+    if not reading.slot_letters or len(table) == 0:
+        return None
+    seen = np.array([LETTERS.index(c) if c != '?' else -1
+                     for c in reading.slot_letters + reading.centre_letter])
+    shown = seen >= 0
+    wrong = (table != seen[None, None, :]) & shown[None, None, :]          # (N, 8, 9)
+    differ = np.count_nonzero(wrong, axis=2)                                # (N, 8)
+    match = np.argwhere(differ == 0)
+    if len(match) != 1:
+        return None
+    n, p = (int(x) for x in match[0])
+    if reading.point1_slot >= 0 and p != reading.point1_slot:
+        return None
+    near = np.argwhere(differ == 1)
+    if len(near):
+        margins = np.nan_to_num(np.asarray(reading.slot_margins, dtype=float), nan=0.0)
+        slot = np.argmax(wrong[near[:, 0], near[:, 1]], axis=1)
+        if np.any(margins[slot] < decisive_margin):
+            return None
+    return codes[n], p
 
 
 def _classify(unit: np.ndarray, refs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ bounded time and memory on any image.
 """
 
 from dataclasses import dataclass, field
-from typing import Iterator, List, Optional, Tuple
+from typing import Iterable, Iterator, List, Optional, Tuple
 
 import numpy as np
 
@@ -30,7 +30,7 @@ from .camera import CameraModel
 from .cards import (apply_h, CardGuess, fit_homography, group, rank_candidates,
                     rotation_about_z)
 from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
-from .code_reading import handedness, read_code, Reading
+from .code_reading import code_table, handedness, read_code, resolve_partial
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .stats import median
@@ -73,9 +73,23 @@ class CardDetection:
 class Detector:
     """Detect colour-dot cards; one instance per pattern configuration."""
 
-    def __init__(self, config: PatternConfig, params: DetectorParams = DetectorParams()):
+    def __init__(self, config: PatternConfig, params: DetectorParams = DetectorParams(),
+                 known_codes: Optional[Iterable[Code]] = None):
+        """
+        Prepare for ``config``'s cards.
+
+        ``known_codes``: the codes that exist (a building map's). With them, a
+        card with up to ``params.max_hidden_slots`` slots hidden by an object
+        is given the one known code that fits what is seen, when no other
+        known code comes within one seen slot of it
+        (:func:`~.code_reading.resolve_partial`); without them, only a hidden
+        point 1 is completed (the one black slot, when seven coloured ones
+        are seen).
+        """
         self.config = config
         self.params = params
+        self._codes = sorted(set(known_codes), key=str) if known_codes is not None else []
+        self._code_table = code_table(self._codes)
         model = config.model_points()[:, :2]
         # Slot-ordered plane points: slot k of ring r taken as point k + 1.
         self._model = model
@@ -203,11 +217,21 @@ class Detector:
             # Colours of the dots kept by the refit, and of those whose inner
             # part is clean though their rim is not (an object beside them).
             readable = valid | (spots.readable & ~spots.valid)
-            reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour)
+            reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour,
+                                max_hidden=params.max_hidden_slots if self._codes else 1,
+                                partial=spots.partial)
             if reading is None:
                 return None
             point1 = reading.point1_slot
             code, margin, ring_codes = reading.code, reading.margin, reading.ring_codes
+            if code is None:
+                # Slots hidden by an object: the one known code that fits, or none.
+                resolved = resolve_partial(reading, self._codes, self._code_table,
+                                           params.decisive_margin)
+                if resolved is None:
+                    return None
+                code, point1 = resolved
+                ring_codes = tuple(r[point1:] + r[:point1] for r in ring_codes)
             valid[list(reading.not_dots)] = False
             ring_valid = valid[1:].reshape(n_rings, RING_POINTS)
             complete = [r for r in range(n_rings) if np.all(ring_valid[r])]
@@ -217,7 +241,7 @@ class Detector:
                 return None
         H_final = H @ rotation_about_z(point1 * np.pi / 4)
         if not dot_image.grey_only and cfg.handedness_mark is not None:
-            if not self._handed(dot_image, camera, H_final, paper, spots, valid, reading):
+            if not self._handed(dot_image, camera, H_final, paper, spots, valid, point1):
                 return None
         # Slot order -> dot order (point 1 first).
         order = np.zeros(cfg.n_dots, dtype=int)
@@ -257,16 +281,20 @@ class Detector:
         return H, valid
 
     def _handed(self, dot_image: DotImage, camera: Optional[CameraModel], H_final: np.ndarray,
-                paper: Paper, spots: SpotMeasures, valid: np.ndarray,
-                reading: Reading) -> bool:
+                paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int) -> bool:
         """Tell whether the handedness marks show the card itself (not its mirror image)."""
         cfg = self.config
         marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, paper,
                               colour=False, core_margin=1.0, refine=False)
-        rows = 1 + reading.point1_slot + RING_POINTS * np.arange(cfg.n_rings)
+        rows = 1 + point1 + RING_POINTS * np.arange(cfg.n_rings)
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:
-            return False
+            # Point 1 hidden: the ring's inks are as dark in their darkest
+            # channel as black is.
+            ring = valid[1:]
+            black = spots.peak[1:][ring]
+            if len(black) < 5:
+                return False
         return handedness(marks, float(median(black))) == 'ok'
 
 

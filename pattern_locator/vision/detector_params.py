@@ -37,6 +37,10 @@ class DetectorParams:
     min_colour_margin: float = 0.35     # of the way from the bisector to the nearest ink
     min_window_darkness: float = 0.12   # a dot must be this much darker than the paper
     max_channel_shift_px: float = 2.0   # colour measured where this shift cannot change it
+    # Occlusion: at most this many slots (both rings) hidden when the known
+    # codes (a building map) can complete the code.
+    max_hidden_slots: int = 3
+    decisive_margin: float = 0.6    # a seen slot that alone tells two known codes apart
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -44,6 +48,9 @@ class DetectorParams:
                               f'got {self.field!r}')
         if self.decimate not in (1, 2):
             raise ConfigError(f'detector: decimate must be 1 or 2, got {self.decimate!r}')
+        if not 0 <= self.max_hidden_slots <= 3:
+            raise ConfigError(f'detector: max_hidden_slots must be 0..3, got '
+                              f'{self.max_hidden_slots!r}')
         if self.max_candidates < 1:
             raise ConfigError(f'detector: max_candidates must be >= 1, got '
                               f'{self.max_candidates!r}')

@@ -6,7 +6,7 @@ it holds no ROS types.
 """
 
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Iterable, List, Optional
 
 import numpy as np
 
@@ -14,7 +14,7 @@ from .camera import CameraModel
 from .detector import CardDetection, Detector, DetectorParams
 from .geometry import Pose
 from .pose_exact import covariance_of_pose, estimate_exact, paper_angles, PosePrior
-from ..card.pattern import PatternConfig
+from ..card.pattern import Code, PatternConfig
 from ..errors import ConfigError, EstimationError
 
 ESTIMATORS = ('exact', 'paper')
@@ -48,13 +48,20 @@ class CardLocator:
 
     def __init__(self, config: PatternConfig, estimator: str = 'exact',
                  detector_params: DetectorParams = DetectorParams(),
-                 min_tilt_deg: float = 0.0, pixel_sigma: Optional[float] = None):
+                 min_tilt_deg: float = 0.0, pixel_sigma: Optional[float] = None,
+                 known_codes: Optional[Iterable[Code]] = None):
+        """
+        Detect with ``detector_params``, locate with ``estimator``.
+
+        ``known_codes`` (a building map's codes) let the detector complete a
+        card partly hidden by an object (see :class:`Detector`).
+        """
         if estimator not in ESTIMATORS:
             raise ConfigError(f'unknown estimator {estimator!r}: use one of '
                               f'{", ".join(ESTIMATORS)}')
         self.config = config
         self.estimator = estimator
-        self.detector = Detector(config, detector_params)
+        self.detector = Detector(config, detector_params, known_codes)
         self.min_tilt_deg = min_tilt_deg
         self.pixel_sigma = pixel_sigma
 

@@ -50,6 +50,8 @@ REASONS = (
     'outside_footprint',         # base outside its room (plus margin) or the building
     'jump',                      # not continuous with the last fix: held until confirmed
     'unconfirmed_first',         # the first fix (or the first after a reset): held likewise
+    'partial_code',              # a card partly hidden, its code completed from the map,
+                                 # not where the last fix puts the robot (or no last fix)
 )
 FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
 # Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.
@@ -367,6 +369,33 @@ class FixGates:
             'jump', f'{jump:.2f} m from the last fix {fix.stamp - last.stamp:.2f} s ago '
             f'(Mahalanobis {distance:.3g} > {p.max_jump_mahalanobis:g}): held back until a '
             f'second image agrees'))
+
+    def check_partial(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
+                      stamp_s: Optional[float], odometry: Optional[BaseMotion] = None,
+                      label: str = 'card') -> Optional[Rejection]:
+        """
+        Return why a fix from a card whose code was completed from the map is refused, or None.
+
+        Such a code is only as sure as the map is complete (a card missing
+        from the map, partly hidden, can read as a mapped one), so it is
+        taken only as a check of where the robot already is: there must be
+        a last fix and this one must be continuous with it (the jump test,
+        without the second-image confirmation). It never starts or restarts
+        the location.
+        """
+        p = self.parameters
+        last = self._accepted
+        if not p.continuity or stamp_s is None or not math.isfinite(stamp_s) or last is None:
+            return self.count(Rejection(
+                'partial_code', f'{label}: code partly hidden and completed from the map; '
+                'taken only to follow a robot already located'))
+        T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
+        distance = self._distance(last, _Fix(float(stamp_s), T, cov), odometry)
+        if distance > p.max_jump_mahalanobis:
+            return self.count(Rejection(
+                'partial_code', f'{label}: code partly hidden and completed from the map, '
+                f'{distance:.3g} (Mahalanobis) from where the last fix puts the robot'))
+        return None
 
     def _accept(self, fix: _Fix) -> None:
         self._accepted = fix

@@ -175,6 +175,10 @@ class RobotLocalizer:
                                 f'{self.max_reprojection_px:.2f} px')
                 continue
             fix, rejection = self._fix(det, mapped, located, camera, motion, base_twist)
+            if rejection is None and det.slots_from_map:
+                rejection = self.gates.check_partial(fix.T_frame_base, fix.covariance,
+                                                     fix.frame_id, stamp_s, odometry,
+                                                     f'card {det.code}')
             if rejection is not None:
                 problems.append(f'card {det.code}: {rejection.message}')
                 rejections.append(rejection.reason)

@@ -60,6 +60,10 @@ class CardDetection:
     homography: np.ndarray          # pattern plane (metres) -> undistorted pixels
     colour_margin: float            # how clearly the colours were read, 0..1
     ring_codes: Tuple[str, ...] = field(default=())   # per ring, the colours read
+    # Slots hidden by an object and filled from the known codes (the map):
+    # such an id is only as sure as the map is complete, so the localizer
+    # takes it only where its last fix already puts the robot.
+    slots_from_map: int = 0
 
     @property
     def centre_px(self) -> np.ndarray:
@@ -209,6 +213,7 @@ class Detector:
             return None
         ring_valid = valid[1:].reshape(n_rings, RING_POINTS)
         complete = [r for r in range(n_rings) if np.all(ring_valid[r])]
+        from_map = 0
         if dot_image.grey_only:
             if not complete:
                 return None
@@ -231,6 +236,7 @@ class Detector:
                 if resolved is None:
                     return None
                 code, point1 = resolved
+                from_map = reading.slot_letters.count('?')
                 ring_codes = tuple(r[point1:] + r[:point1] for r in ring_codes)
             valid[list(reading.not_dots)] = False
             ring_valid = valid[1:].reshape(n_rings, RING_POINTS)
@@ -260,7 +266,7 @@ class Detector:
             ring_px = points[seen]
         size = 0.5 * float(np.max(np.linalg.norm(ring_px[:, None] - ring_px[None], axis=2)))
         return CardDetection(code, ids, points, areas, tuple(complete), size, H_final,
-                             float(margin), tuple(ring_codes))
+                             float(margin), tuple(ring_codes), from_map)
 
     def _refit(self, spots: SpotMeasures, camera: Optional[CameraModel]):
         """Homography refitted to the measured dots; drops those off it. (None, None) if lost."""

@@ -1,0 +1,93 @@
+"""
+A card partly hidden, its code completed from the map: followed, never a start.
+
+The detector completes a code whose slots an object hides from the map's
+codes when exactly one fits (``vision/code_reading.resolve_partial``). A
+card missing from the map can fit a mapped code on the slots that show, so
+``RobotLocalizer`` takes such a fix only where its last fix puts the robot
+(``gates.check_partial``). Rendered on the drive floor: an object painted
+over both dots of one ring point of a corridor card.
+"""
+
+import math
+
+import cv2
+import numpy as np
+from pattern_locator.localization.gates import FixGates, GateParameters
+from pattern_locator.localization.head import HeadGeometry
+from pattern_locator.localization.localizer import RobotLocalizer
+from pattern_locator.sim.drive import yaw_pose
+from pattern_locator.sim.floor_file import load_floor_world
+from pattern_locator.sim.floor_scene import FloorScene
+from pattern_locator.vision.camera import CameraModel
+import pytest
+
+WORLD = load_floor_world()
+HEAD = HeadGeometry()
+CAMERA = CameraModel.from_focal(640, 480, 900.0)
+IDS = (4, 12, 3)            # the east corridor's west wall card, facing east
+BASE = yaw_pose(24.3, 10.0, math.pi, 12.0)
+
+
+@pytest.fixture(scope='module')
+def frames():
+    """Return (head pan, tilt, the clean image, the image with ring point 2 hidden)."""
+    card = WORLD.card(IDS)
+    pan, tilt = HEAD.aim_angles(BASE.inverse().apply(card.T_building_card.t[None])[0])
+    scene = FloorScene(WORLD, HEAD)
+    T_camera = scene.true_camera_pose(BASE, pan, tilt)
+    clean = scene.render_still(T_camera, CAMERA, seed=3)
+    pattern = WORLD.pattern
+    T_camera_card = T_camera.inverse() @ card.T_building_card
+    points = [pattern.model_points()[pattern.dot_index(r, 2)] for r in range(pattern.n_rings)]
+    px = CAMERA.project(T_camera_card.apply(np.array(points)))
+    radius = 2.2 * pattern.ring_dot_radius * CAMERA.fx / float(np.linalg.norm(T_camera_card.t))
+    hidden = clean.copy()
+    a, b = px[0], px[-1]
+    along = (b - a) / np.linalg.norm(b - a)
+    side = np.array([-along[1], along[0]]) * radius
+    band = np.array([a - along * radius + side, a - along * radius - side,
+                     b + along * radius - side, b + along * radius + side])
+    cv2.fillConvexPoly(hidden, np.round(band).astype(np.int32), (70, 80, 95))
+    return pan, tilt, clean, hidden
+
+
+def localizer():
+    return RobotLocalizer(WORLD.pattern, WORLD.building, HEAD, output_frame='building',
+                          gates=GateParameters(footprint='adjacent'))
+
+
+def test_a_partly_hidden_card_is_read_from_the_map(frames):
+    pan, tilt, _, hidden = frames
+    dets = localizer().locator.detector.detect(hidden, CAMERA)
+    assert [(d.ids.as_tuple(), d.slots_from_map) for d in dets] == [(IDS, 1)]
+
+
+def test_it_follows_a_located_robot_and_never_starts_one(frames):
+    pan, tilt, clean, hidden = frames
+    loc = localizer()
+    # Alone it starts nothing, however often it is seen.
+    for k in range(3):
+        result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=0.1 * k)
+        assert result.fix is None and result.rejections == ('partial_code',)
+    # Two clean images locate the robot (the first is confirmed by the second) ...
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0).fix is None
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    # ... and then the partly hidden card gives fixes where the robot is.
+    fix = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2).fix
+    assert fix is not None and fix.ids.as_tuple() == IDS
+    assert np.linalg.norm(fix.T_frame_base.t - BASE.t) < 0.03
+    assert loc.rejection_counts()['partial_code'] == 3
+
+
+def test_the_gate_refuses_a_completed_code_away_from_the_last_fix():
+    gates = FixGates(WORLD.building, GateParameters(footprint='off'))
+    cov = np.diag([1e-4] * 3 + [1e-4] * 3)
+    T = yaw_pose(5.0, 6.3, 0.0, 12.0)
+    assert gates.check_partial(T, cov, 'building', 1.0).reason == 'partial_code'
+    assert gates.check_continuity(T, cov, 'building', 1.0) is not None    # held, unconfirmed
+    assert gates.check_continuity(T, cov, 'building', 1.1) is None
+    assert gates.check_partial(yaw_pose(5.01, 6.3, 0.0, 12.0), cov, 'building', 1.2) is None
+    far = gates.check_partial(yaw_pose(9.0, 6.3, 0.0, 12.0), cov, 'building', 1.2)
+    assert far.reason == 'partial_code' and 'Mahalanobis' in far.message
+    assert gates.check_partial(T, cov, 'building', None).reason == 'partial_code'

@@ -73,15 +73,26 @@ class Paper:
 
 
 def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
-               paper_xy: np.ndarray) -> Optional[Paper]:
+               paper_xy: np.ndarray, clearance: Optional[np.ndarray] = None
+               ) -> Optional[Paper]:
     """
     Measure the card's white (median over plane points between the dots) and its noise.
 
     The noise is measured there too, from each point's 3x3 neighbourhood:
     next to a small card in a busy scene the image's local noise says more
-    about the scene than about the card.
+    about the scene than about the card. ``clearance`` (metres, per point)
+    is how far each point is from ink or the card's edge: on a far card
+    most points' neighbourhoods hold a blurred dot's edge, whose slope is
+    no noise, so the noise is taken where the image has room.
     """
     pts = apply_h(H, paper_xy)
+    if clearance is not None:
+        # Room in pixels: clearance times the map's smaller singular value.
+        J = h_jacobian(H, paper_xy)
+        sq = np.einsum('nij,nij->n', J, J)
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        room = np.asarray(clearance) * np.sqrt(np.maximum(
+            0.5 * (sq - np.sqrt(np.maximum(sq * sq - 4.0 * det * det, 0.0))), 0.0))
     if camera is not None and camera.has_distortion:
         pts = camera.distort_pixels(pts)
     h, w = dot_image.image.shape[:2]
@@ -89,6 +100,12 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     pts = pts[inside]
     if len(pts) < 4:
         return None
+    roomy = np.ones(len(pts), dtype=bool)
+    if clearance is not None:
+        # A 3x3 patch and a blur of a pixel or so: 3 pixels from ink. At
+        # least the four points with the most room.
+        room = room[inside]
+        roomy = room >= min(3.0, float(np.sort(room)[-4]))
     xs = np.round(pts[:, 0]).astype(int)
     ys = np.round(pts[:, 1]).astype(int)
     d = np.arange(-1, 2)
@@ -100,7 +117,13 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
     # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(median(spread)) / 0.75)
+    # Ink's or the background's slope only adds to the spread: the quieter
+    # of all the points and those with room, and (a card too small for any
+    # room) of the image's own noise there, measured where it is quietest.
+    noise = min(float(median(spread)), float(median(spread[roomy]))) / 0.75
+    if clearance is not None and not np.any(room[roomy] >= 3.0):
+        noise = min(noise, float(median(dot_image.noise_at(pts[:, 0], pts[:, 1]))))
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), noise)
 
 
 @dataclass(frozen=True)

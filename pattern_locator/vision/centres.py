@@ -70,6 +70,11 @@ class Paper:
 
     colour: np.ndarray      # (3,) BGR, or (1,) grey: the card's white
     sigma: float            # noise (grey levels, full resolution) of the darkest channel
+    # The sensor's noise alone, where the paper has room (a far card: the
+    # other points' neighbourhoods hold blurred dot edges, in `sigma`).
+    # Whether a dot is dark enough is judged against it; the weights and
+    # the shape tests keep `sigma`, which allows for the blur's structure.
+    quiet: Optional[float] = None
 
 
 def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
@@ -117,13 +122,14 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
     # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
+    sigma = float(median(spread)) / 0.75
     # Ink's or the background's slope only adds to the spread: the quieter
     # of all the points and those with room, and (a card too small for any
     # room) of the image's own noise there, measured where it is quietest.
-    noise = min(float(median(spread)), float(median(spread[roomy]))) / 0.75
+    quiet = min(sigma, float(median(spread[roomy])) / 0.75)
     if clearance is not None and not np.any(room[roomy] >= 3.0):
-        noise = min(noise, float(median(dot_image.noise_at(pts[:, 0], pts[:, 1]))))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), noise)
+        quiet = min(quiet, float(median(dot_image.noise_at(pts[:, 0], pts[:, 1]))))
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), sigma, quiet)
 
 
 @dataclass(frozen=True)
@@ -350,7 +356,8 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
         pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
-    floor = np.maximum(0.04 * level, 2.0 * sigma)
+    quiet = sigma if paper.quiet is None else np.minimum(sigma, np.float32(paper.quiet / s))
+    floor = np.maximum(0.04 * level, 2.0 * quiet)
     raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
     weight = raw
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
@@ -382,7 +389,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
     expected = np.pi * major[idx] * minor[idx]
     relative = top / np.maximum(level, 1.0)
-    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * sigma)
+    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * quiet)
     isolated = rim_mean <= 0.3 * top
     sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
     # A window beyond the border: a spot cut by it has a false centre.

@@ -129,7 +129,9 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     quiet = min(sigma, float(median(spread[roomy])) / 0.75)
     if clearance is not None and not np.any(room[roomy] >= 3.0):
         quiet = min(quiet, float(median(dot_image.noise_at(pts[:, 0], pts[:, 1]))))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), sigma, quiet)
+    # A few flat patches (JPEG quantises noise away) say little: at least a
+    # grey level.
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), sigma, max(quiet, min(sigma, 1.0)))
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import numpy as np
 
 from .camera import CameraModel
 from .detector_params import DetectorParams
-from .dots import Blobs
+from .dots import Blobs, DotImage
 from .stats import median
 from ..card.pattern import PatternConfig, RING_POINTS
 
@@ -36,6 +36,13 @@ MIN_NEIGHBOURS = 6
 _CELL = 16
 # Candidates looked at more closely, per candidate examined.
 _SHORTLIST = 4
+# Far cards whose ring dots vanished in the decimated image: centres up to
+# this area (image pixels), this many tried, this many examined.
+_FAR_MAX_AREA = 64.0
+_FAR_MIN_AREA = 8.0
+_FAR_TRIES = 8
+_FAR_EXTRA = 3
+_FAR_MIN_CONTRAST = 9.0     # noise sigmas
 
 
 @dataclass(frozen=True)
@@ -112,6 +119,69 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
     return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
 
 
+def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray,
+                   claimed: np.ndarray) -> np.ndarray:
+    """
+    Return small centre blobs whose ring dots are too pale to be blobs once decimated.
+
+    A far card's ring dots are two or three pixels across: decimated, they
+    are paler than the segmentation's threshold, so the evidence count of
+    :func:`rank_candidates` sees no ring. The darkest small blobs not yet
+    examined (``taken``) nor inside a card found (``claimed``) are looked at
+    again with a lenient threshold (:meth:`DotImage.faint_spots`); those
+    with a ring's worth of faint spots round them are candidates. At most
+    ``_FAR_TRIES`` windows are looked at and ``_FAR_EXTRA`` returned: the
+    cost per image is bounded.
+    """
+    blobs = dot_image.blobs
+    if blobs.scale == 1 or len(blobs) == 0:
+        return np.zeros(0, dtype=np.intp)
+    ok = (blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_MAX_AREA) & ~claimed
+    ok[np.asarray(taken, dtype=np.intp)] = False
+    idx = np.flatnonzero(ok)
+    # A centre dot is ink, the darkest thing on the card: clearly darker
+    # than the noise round it (a speck of texture or of a dark noisy frame
+    # is not), darkest first.
+    u, v = blobs.u[idx], blobs.v[idx]
+    white, noise = dot_image.white_at(u, v), dot_image.noise_at(u, v)
+    dark = dot_image.peak_darkness(u, v, white)
+    sure = dark * white >= _FAR_MIN_CONTRAST * noise
+    if not np.any(sure):
+        return np.zeros(0, dtype=np.intp)
+    pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]
+    rho_out = config.ring_radii[0] / config.centre_dot_radius
+    found = []
+    for k in pick:
+        ci = idx[k]
+        # The reach of rank_candidates, half as big again: a centre this
+        # small, pale at its rim, comes out smaller than it is.
+        radius = math.sqrt(blobs.area[ci] / math.pi)
+        reach = 2.25 * rho_out * max(blobs.extent(ci), radius) + 3.0
+        spots, own = dot_image.faint_spots(float(u[k]), float(v[k]), reach,
+                                           2.0 * blobs.area[ci] + 8.0, float(white[k]),
+                                           float(noise[k]))
+        # A centre dot is a dot, not the darkest part of a bigger dark thing,
+        # and its rings' spots are all round it: in most of the eight
+        # directions, their mean near the centre.
+        if own > 6.0 * blobs.area[ci]:
+            continue
+        rho = np.hypot(spots[:, 0], spots[:, 1])
+        inside = (rho > 1.5 * radius) & (rho < reach)
+        ring, rho = spots[inside], rho[inside]
+        if len(ring) < MIN_NEIGHBOURS:
+            continue
+        octant = (np.arctan2(ring[:, 1], ring[:, 0]) + np.pi) * (RING_POINTS / (2 * np.pi))
+        if np.count_nonzero(np.bincount(octant.astype(np.intp) % RING_POINTS)) < 5:
+            continue
+        if math.hypot(*ring.mean(axis=0)) > 0.4 * float(median(rho)):
+            continue
+        # Darkest first; a crowd of faint spots (more than a card's two
+        # rings and marks, and some) says texture: last.
+        found.append((len(ring) > 3 * RING_POINTS, int(ci)))
+    return np.array([ci for _, ci in sorted(found, key=lambda f: f[0])[:_FAR_EXTRA]],
+                    dtype=np.intp)
+
+
 def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarray:
     """
     How much the blobs round each candidate look like a card's rings.
@@ -165,8 +235,15 @@ def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
     ratio = blobs.area / blobs.area[ci]
     # Ring dots are a third of the centre's area (more or less with
     # perspective and blur); specks of noise are far smaller.
-    near = np.flatnonzero((np.abs(du) < reach) & (np.abs(dv) < reach)
-                          & (ratio < 1.2) & (ratio > 0.08))
+    within = (np.abs(du) < reach) & (np.abs(dv) < reach) & (ratio < 1.2)
+    near = np.flatnonzero(within & (ratio > 0.08))
+    if blobs.area[ci] <= _FAR_MAX_AREA * blobs.scale ** 2:
+        # A far card's ring dots, two or three pixels across and pale, keep
+        # a pixel or two above the threshold: any blob at all, unless the
+        # reach is crowded with them (fine texture).
+        faint = np.flatnonzero(within & (ratio <= 0.08))
+        if len(faint) and len(near) + len(faint) <= 3 * RING_POINTS * len(ring_rho):
+            near = np.flatnonzero(within)
     if len(near) < RING_POINTS - 2:
         return None
     offsets = np.column_stack([du[near], dv[near]])

@@ -75,18 +75,34 @@ class Paper:
 
     colour: np.ndarray      # (3,) BGR, or (1,) grey: the card's white
     sigma: float            # noise (grey levels, full resolution) of the darkest channel
+    # The sensor's noise alone, where the paper has room (a far card: the
+    # other points' neighbourhoods hold blurred dot edges, in `sigma`).
+    # Whether a dot is dark enough is judged against it; the weights and
+    # the shape tests keep `sigma`, which allows for the blur's structure.
+    quiet: Optional[float] = None
 
 
 def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
-               paper_xy: np.ndarray) -> Optional[Paper]:
+               paper_xy: np.ndarray, clearance: Optional[np.ndarray] = None
+               ) -> Optional[Paper]:
     """
     Measure the card's white (median over plane points between the dots) and its noise.
 
     The noise is measured there too, from each point's 3x3 neighbourhood:
     next to a small card in a busy scene the image's local noise says more
-    about the scene than about the card.
+    about the scene than about the card. ``clearance`` (metres, per point)
+    is how far each point is from ink or the card's edge: on a far card
+    most points' neighbourhoods hold a blurred dot's edge, whose slope is
+    no noise, so the noise is taken where the image has room.
     """
     pts = apply_h(H, paper_xy)
+    if clearance is not None:
+        # Room in pixels: clearance times the map's smaller singular value.
+        J = h_jacobian(H, paper_xy)
+        sq = np.einsum('nij,nij->n', J, J)
+        det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+        room = np.asarray(clearance) * np.sqrt(np.maximum(
+            0.5 * (sq - np.sqrt(np.maximum(sq * sq - 4.0 * det * det, 0.0))), 0.0))
     if camera is not None and camera.has_distortion:
         pts = camera.distort_pixels(pts)
     h, w = dot_image.image.shape[:2]
@@ -94,6 +110,12 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     pts = pts[inside]
     if len(pts) < 4:
         return None
+    roomy = np.ones(len(pts), dtype=bool)
+    if clearance is not None:
+        # A 3x3 patch and a blur of a pixel or so: 3 pixels from ink. At
+        # least the four points with the most room.
+        room = room[inside]
+        roomy = room >= min(3.0, float(np.sort(room)[-4]))
     xs = np.round(pts[:, 0]).astype(int)
     ys = np.round(pts[:, 1]).astype(int)
     d = np.arange(-1, 2)
@@ -105,7 +127,16 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     darkest = patch if patch.ndim == 3 else patch.min(axis=-1)
     # Mean |pixel - 3x3 mean| is sqrt(8/9) sqrt(2/pi) = 0.75 sigma for white noise.
     spread = np.abs(darkest - darkest.mean(axis=(1, 2), keepdims=True)).mean(axis=(1, 2))
-    return Paper(np.maximum(np.atleast_1d(white), 1.0), float(median(spread)) / 0.75)
+    sigma = float(median(spread)) / 0.75
+    # Ink's or the background's slope only adds to the spread: the quieter
+    # of all the points and those with room, and (a card too small for any
+    # room) of the image's own noise there, measured where it is quietest.
+    quiet = min(sigma, float(median(spread[roomy])) / 0.75)
+    if clearance is not None and not np.any(room[roomy] >= 3.0):
+        quiet = min(quiet, float(median(dot_image.noise_at(pts[:, 0], pts[:, 1]))))
+    # A few flat patches (JPEG quantises noise away) say little: at least a
+    # grey level.
+    return Paper(np.maximum(np.atleast_1d(white), 1.0), sigma, max(quiet, min(sigma, 1.0)))
 
 
 @dataclass(frozen=True)
@@ -332,7 +363,8 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
         pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
-    floor = np.maximum(0.04 * level, 2.0 * sigma)
+    quiet = sigma if paper.quiet is None else np.minimum(sigma, np.float32(paper.quiet / s))
+    floor = np.maximum(0.04 * level, 2.0 * quiet)
     raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
     weight = raw
     mine, qx, qy = g.cells(layout, spots[idx], g.pred)
@@ -364,7 +396,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
     expected = np.pi * major[idx] * minor[idx]
     relative = top / np.maximum(level, 1.0)
-    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * sigma)
+    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * quiet)
     isolated = rim_mean <= 0.3 * top
     sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
     # A window beyond the border: a spot cut by it has a false centre.

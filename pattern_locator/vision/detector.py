@@ -27,8 +27,8 @@ from typing import Iterable, Iterator, List, Optional, Tuple
 import numpy as np
 
 from .camera import CameraModel
-from .cards import (apply_h, CardGuess, fit_homography, group, rank_candidates,
-                    rotation_about_z)
+from .cards import (apply_h, CardGuess, far_candidates, fit_homography, group,
+                    rank_candidates, rotation_about_z)
 from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
 from .code_reading import code_table, handedness, read_code, resolve_partial
 from .detector_params import DetectorParams
@@ -99,6 +99,7 @@ class Detector:
         self._model = model
         self._radii = config.dot_radii()
         self._paper_xy = _paper_points(config)
+        self._paper_room = _paper_clearance(config, self._paper_xy)
         self._rho_out = config.ring_radii[0] / config.centre_dot_radius
         half = config.card_size / 2
         # How the card's plane is shared between the windows of its dots: before
@@ -121,8 +122,15 @@ class Detector:
         blobs = dot_image.blobs
         claimed = np.zeros(len(blobs), dtype=bool)
         cards = []
-        for ci in rank_candidates(blobs, self.config, self.params,
-                                  dot_image.noise_at(blobs.u, blobs.v)):
+        ranked = rank_candidates(blobs, self.config, self.params,
+                                 dot_image.noise_at(blobs.u, blobs.v))
+
+        def candidates() -> Iterator[int]:
+            yield from ranked
+            # Then far cards whose ring dots decimation lost (bounded; see cards.py).
+            yield from far_candidates(dot_image, self.config, ranked, claimed)
+
+        for ci in candidates():
             if claimed[ci]:
                 continue
             card = None
@@ -203,7 +211,7 @@ class Detector:
         cfg, params = self.config, self.params
         n_rings = cfg.n_rings
         H = guess.homography
-        paper = card_paper(dot_image, camera, H, self._paper_xy)
+        paper = card_paper(dot_image, camera, H, self._paper_xy, self._paper_room)
         if paper is None:
             return None
         spots = measure_spots(dot_image, camera, H, self._dot_layout, self._dots, paper,
@@ -337,6 +345,19 @@ def _paper_points(config: PatternConfig) -> np.ndarray:
         far = np.min(np.linalg.norm(pts[:, None] - _mark_places(config)[None], axis=2), axis=1)
         pts = pts[far > config.mark_radius + config.ring_dot_radius]
     return pts
+
+
+def _paper_clearance(config: PatternConfig, paper_xy: np.ndarray) -> np.ndarray:
+    """Distance (metres) from each paper point to the nearest ink (dot, mark place) or edge."""
+    ink = config.model_points()[:, :2]
+    radii = config.dot_radii()
+    if config.handedness_mark is not None:
+        places = _mark_places(config)
+        ink = np.vstack([ink, places])
+        radii = np.concatenate([radii, np.full(len(places), config.mark_radius)])
+    to_ink = np.linalg.norm(paper_xy[:, None] - ink[None], axis=2) - radii[None]
+    to_edge = config.card_size / 2 - np.max(np.abs(paper_xy), axis=1)
+    return np.minimum(to_ink.min(axis=1), to_edge)
 
 
 def _mark_places(config: PatternConfig) -> np.ndarray:

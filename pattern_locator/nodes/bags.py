@@ -338,6 +338,10 @@ class _Clock:
             self._pub.publish(self._msg)
             self._last, self._last_ns = now, bag_ns
 
+    def restart(self) -> None:
+        """A new pass of the bag (``--loop``): its time may go back to the start once."""
+        self._last_ns = -1
+
     def sleep_until(self, due: float, bag_ns_at: Callable[[float], int]) -> None:
         """Sleep until ``due`` (monotonic), publishing the bag time meanwhile."""
         while True:
@@ -465,6 +469,8 @@ def play(bag_dir: Union[str, Path], rate: float = 1.0, context=None,
                 if delay_s > 0.0:
                     time.sleep(delay_s)
                 start_wall = first_ns = None
+                if clock is not None:
+                    clock.restart()
                 for connection, stamp_ns, raw in reader.messages(connections=connections,
                                                                  start=start_ns):
                     topic = connection.topic

@@ -20,7 +20,7 @@ from pattern_locator.nodes.bags import (IMAGE_TOPIC, JOINT_SAMPLE_OFFSET_NS, pla
 from pattern_locator.sim.paper_setup import route
 from pattern_locator.vision.geometry import rotation_from_quaternion
 import pytest
-from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from rclpy.qos import qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from ros_tools import client_node, locator_process, spin_until
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -225,12 +225,21 @@ def test_play_options_like_rosbag2(chatter, client, capsys):
     assert clocks, 'no /clock'
     assert clocks == sorted(clocks) and 1.5 - 1e-9 <= clocks[0] and clocks[-1] <= 1.95 + 1e-9
     assert 'playing chatter' in capsys.readouterr().err      # the progress line
-    # --loop (here two passes) and --topics.
+    # --loop (here two passes) and --topics; with --clock the time goes back
+    # once, at the second pass, and never within a pass.
     got.clear()
+    trace = []
+    # A deep queue: play() runs in this thread, the executor takes them after.
+    node.create_subscription(Clock, '/clock', lambda m: trace.append(
+        m.clock.sec + m.clock.nanosec * 1e-9),
+        QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
     assert play(chatter, rate=4.0, topics=['/chatter'], remap={'/chatter': '/opt/chatter'},
-                wait_for_subscribers=['/opt/chatter'], loops=2) == 40
+                wait_for_subscribers=['/opt/chatter'], loops=2, clock_hz=100.0) == 40
     assert spin_until(executor, lambda: len(got) == 40, 5.0), len(got)
     assert got == [f'hello {i}' for i in range(20)] * 2
+    spin_until(executor, lambda: False, 0.2)
+    backs = [k for k in range(1, len(trace)) if trace[k] < trace[k - 1]]
+    assert len(backs) == 1 and trace[backs[0] - 1] >= 1.9 and trace[backs[0]] <= 1.1, trace
 
 
 def test_bag_play_command_line_errors(chatter, capsys):

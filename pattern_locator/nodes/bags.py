@@ -339,7 +339,7 @@ class _Clock:
             self._last, self._last_ns = now, bag_ns
 
     def restart(self) -> None:
-        """A new pass of the bag (``--loop``): its time may go back to the start once."""
+        """Start a new pass of the bag (``--loop``): its time may go back to the start once."""
         self._last_ns = -1
 
     def sleep_until(self, due: float, bag_ns_at: Callable[[float], int]) -> None:

@@ -127,9 +127,10 @@ def route_poses(waypoints_xy: Sequence[Sequence[float]], z: float, step_m: float
             out.append((along + s * length, _yaw_pose(*(a + s * (b - a)), heading, z), False))
         along += length
         previous = heading
+    if previous is None:
+        raise ConfigError('layout check: a route needs two or more distinct waypoints')
     last = points[-1]
-    if previous is not None:
-        out.append((along, _yaw_pose(last[0], last[1], previous, z), False))
+    out.append((along, _yaw_pose(last[0], last[1], previous, z), False))
     return out
 
 
@@ -200,6 +201,8 @@ def check_rooms(planner: GazePlanner, building: BuildingMap, floor: int, step_m:
 
 def locator_parameters(data: Mapping[str, Any]) -> Dict[str, Any]:
     """Return the ``ros__parameters`` of a locator params file's (first) node section."""
+    if not isinstance(data, Mapping):
+        raise ConfigError('layout check: the params file is not a mapping of node sections')
     for key, section in data.items():
         if isinstance(section, Mapping) and isinstance(section.get('ros__parameters'), Mapping):
             return dict(section['ros__parameters'])

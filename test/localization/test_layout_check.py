@@ -74,6 +74,8 @@ def test_a_route_turns_in_place_at_its_corners():
         route_poses([(0.0, 0.0)], 0.0)
     with pytest.raises(ConfigError, match='two or more'):
         route_poses([(0.0, 0.0), (math.nan, 1.0)], 0.0)
+    with pytest.raises(ConfigError, match='distinct'):
+        route_poses([(1.0, 2.0), (1.0, 2.0)], 0.0)
 
 
 def test_a_room_sampled_on_a_grid(floor_data):
@@ -112,6 +114,8 @@ def test_the_locator_params_give_the_head_and_gaze():
     assert gaze.max_distance_m == 6.0
     with pytest.raises(ConfigError, match='ros__parameters'):
         locator_parameters({'locator': {}})
+    with pytest.raises(ConfigError, match='not a mapping'):
+        locator_parameters(['locator'])
     with pytest.raises(ConfigError):
         head_and_gaze({'gaze.max_distance_m': -1.0})
 

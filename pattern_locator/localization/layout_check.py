@@ -29,7 +29,7 @@ from .gaze import GazeParameters, GazePlanner
 from .head import HeadGeometry
 from ..errors import ConfigError
 from ..resources import read_yaml
-from ..vision.geometry import Pose
+from ..vision.geometry import Pose, yaw_of, yaw_pose
 
 # Headings at which a turn in place at a corner is sampled.
 TURN_STEP_RAD = math.radians(10.0)
@@ -91,11 +91,6 @@ def floor_height(building: BuildingMap, floor: int) -> float:
     return float(min(heights))
 
 
-def _yaw_pose(x: float, y: float, heading: float, z: float) -> Pose:
-    c, s = math.cos(heading), math.sin(heading)
-    return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([x, y, z]))
-
-
 def route_poses(waypoints_xy: Sequence[Sequence[float]], z: float, step_m: float = 0.1
                 ) -> List[Tuple[float, Pose, bool]]:
     """
@@ -119,18 +114,18 @@ def route_poses(waypoints_xy: Sequence[Sequence[float]], z: float, step_m: float
         if previous is not None:
             turn = math.remainder(heading - previous, 2.0 * math.pi)
             for k in range(1, int(abs(turn) / TURN_STEP_RAD)):
-                out.append((along, _yaw_pose(a[0], a[1], previous + math.copysign(
+                out.append((along, yaw_pose(a[0], a[1], previous + math.copysign(
                     k * TURN_STEP_RAD, turn), z), True))
         n = max(int(math.ceil(length / step_m)), 1)
         for k in range(n):
             s = k / n
-            out.append((along + s * length, _yaw_pose(*(a + s * (b - a)), heading, z), False))
+            out.append((along + s * length, yaw_pose(*(a + s * (b - a)), heading, z), False))
         along += length
         previous = heading
     if previous is None:
         raise ConfigError('layout check: a route needs two or more distinct waypoints')
     last = points[-1]
-    out.append((along, _yaw_pose(last[0], last[1], previous, z), False))
+    out.append((along, yaw_pose(last[0], last[1], previous, z), False))
     return out
 
 
@@ -150,7 +145,7 @@ def check_route(planner: GazePlanner, waypoints_xy: Sequence[Sequence[float]], z
         blind += 1
         xy = (float(pose.t[0]), float(pose.t[1]))
         if current is None:
-            heading = math.degrees(math.atan2(pose.R[1, 0], pose.R[0, 0]))
+            heading = math.degrees(yaw_of(pose.R))
             current = [along, along, xy, xy, heading, turning]
         else:
             current[1], current[3] = along, xy
@@ -181,16 +176,15 @@ def check_rooms(planner: GazePlanner, building: BuildingMap, floor: int, step_m:
         ys = np.arange(margin_m, sy - margin_m + 1e-9, step_m) if sy > 2 * margin_m else [sy / 2]
         places = views = seen = 0
         blind: List[Tuple[float, float]] = []
+        room_yaw = yaw_of(room.T_building_room.R)
         for x in xs:
             for y in ys:
                 p = room.T_building_room.apply(np.array([[x, y, 0.0]]))[0]
                 places += 1
                 here = 0
                 for a in angles:
-                    heading = a + math.atan2(room.T_building_room.R[1, 0],
-                                             room.T_building_room.R[0, 0])
                     views += 1
-                    if planner.options(_yaw_pose(p[0], p[1], heading, p[2])):
+                    if planner.options(yaw_pose(p[0], p[1], room_yaw + a, p[2])):
                         here += 1
                 seen += here
                 if here == 0:

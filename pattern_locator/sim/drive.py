@@ -34,7 +34,7 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import ConfigError
-from ..vision.geometry import Pose
+from ..vision.geometry import Pose, yaw_pose
 
 PHASES = ('stop', 'turn', 'drive')
 # A corner sharper than this is not driven round: make the waypoint a stop.
@@ -44,12 +44,6 @@ MAX_CORNER_DEG = 150.0
 def wrap_angle(angle: float) -> float:
     """Return the angle in [-pi, pi)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def yaw_pose(x: float, y: float, heading: float, z: float = 0.0) -> Pose:
-    """Return the pose of a base on a level floor at (x, y, z) with this heading (rad)."""
-    c, s = math.cos(heading), math.sin(heading)
-    return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([x, y, z]))
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ from ..errors import ConfigError
 from ..localization.building import load_building, wall_card_rotation
 from ..localization.head import R_TILT_OPTICAL
 from ..vision.camera import CameraModel
-from ..vision.geometry import Pose, rodrigues
+from ..vision.geometry import Pose, rodrigues, yaw_of
 
 # "As hung": off the plan by up to 5 cm along the wall and 3 degrees (issue 13).
 # Walls are plumb and near their planned line, so the card's tilt out of the
@@ -74,11 +74,6 @@ def camera_mount(height: float = CAMERA_HEIGHT_M, pitch_deg: float = CAMERA_PITC
 def planar_pose(x: float, y: float, yaw: float, z: float = 0.0) -> Pose:
     """Return a pose on the floor: position (x, y, z), turned by ``yaw`` about +z."""
     return Pose(rodrigues(np.array([0.0, 0.0, yaw])), np.array([x, y, z]))
-
-
-def yaw_of(R: np.ndarray) -> float:
-    """Return the heading of a rotation's x axis in the xy plane (rad)."""
-    return math.atan2(R[1, 0], R[0, 0])
 
 
 def _wrap(angle):

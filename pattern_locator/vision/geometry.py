@@ -7,6 +7,7 @@ pattern points into the camera frame.
 """
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -49,6 +50,17 @@ class Pose:
 
     def rvec(self) -> np.ndarray:
         return rotation_vector(self.R)
+
+
+def yaw_pose(x: float, y: float, heading: float, z: float = 0.0) -> Pose:
+    """Return the pose of a base on a level floor at (x, y, z) with this heading (rad)."""
+    c, s = math.cos(heading), math.sin(heading)
+    return Pose(np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([x, y, z]))
+
+
+def yaw_of(R: np.ndarray) -> float:
+    """Return the heading of a rotation's x axis in the xy plane (rad)."""
+    return math.atan2(R[1, 0], R[0, 0])
 
 
 def rodrigues(rvec: np.ndarray) -> np.ndarray:

@@ -346,10 +346,9 @@ class FixGates:
         stamp (within 1 ms), else the maximum speed and yaw rate are.
         """
         p = self.parameters
-        if not p.continuity or stamp_s is None or not math.isfinite(stamp_s):
+        fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
+        if fix is None:
             return None
-        T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
-        fix = _Fix(float(stamp_s), T, cov)
         last = self._accepted
         if last is not None and fix.stamp < last.stamp - p.clock_jump_back_s:
             self.reset()
@@ -383,19 +382,26 @@ class FixGates:
         without the second-image confirmation). It never starts or restarts
         the location.
         """
-        p = self.parameters
+        fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
         last = self._accepted
-        if not p.continuity or stamp_s is None or not math.isfinite(stamp_s) or last is None:
+        if fix is None or last is None:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map; '
                 'taken only to follow a robot already located'))
-        T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
-        distance = self._distance(last, _Fix(float(stamp_s), T, cov), odometry)
-        if distance > p.max_jump_mahalanobis:
+        distance = self._distance(last, fix, odometry)
+        if distance > self.parameters.max_jump_mahalanobis:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map, '
                 f'{distance:.3g} (Mahalanobis) from where the last fix puts the robot'))
         return None
+
+    def _judged(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
+                stamp_s: Optional[float]) -> Optional[_Fix]:
+        """Return a fix in the building frame for the continuity tests, or None if not judged."""
+        if not self.parameters.continuity or stamp_s is None or not math.isfinite(stamp_s):
+            return None
+        T, cov, _ = pose_in_building(T_frame_base, covariance, frame_id, self.building)
+        return _Fix(float(stamp_s), T, cov)
 
     def _accept(self, fix: _Fix) -> None:
         self._accepted = fix

@@ -354,6 +354,14 @@ class LocatorNode(Node):
             output_frame=p['output_frame'], fusion=p['fusion'],
             min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'],
             gates=gate_parameters(p), uncertainty=uncertainty_parameters(p))
+        # Compile (or load from numba's cache) the detector's passes now, not
+        # on the first camera frame; and check that it reads a drawn card.
+        started = time.monotonic()
+        read = self.localizer.locator.detector.warm_up()
+        self.get_logger().info(f'detector ready in {time.monotonic() - started:.2f} s')
+        if read < 2:
+            self.get_logger().error(f'the detector read {read} of 2 cards drawn face-on at start: '
+                                    'check the pattern configuration')
         self.joint_margin_rad = math.radians(p['joint_margin_deg'])
         self.joints = JointStateBuffer(max_age_s=p['joint_state_max_age_s'], head=self.head,
                                        margin_rad=self.joint_margin_rad)

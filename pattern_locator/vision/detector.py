@@ -33,6 +33,7 @@ from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasure
 from .code_reading import code_table, handedness, read_code, resolve_partial
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
+from .drawn_card import drawn_cards
 from .stats import median
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
@@ -143,6 +144,20 @@ class Detector:
             claimed |= self._covered(card, blobs, camera)
             cards.append(card)
         return cards
+
+    def warm_up(self) -> int:
+        """
+        Read a drawn image of two cards; return how many were read right (2 when all is well).
+
+        The first call of the compiled passes compiles them or loads them from
+        numba's cache: a node calls this at start so that its first camera
+        frame does not wait for that. The card drawn is one of the known codes
+        (else any code) with the most colours, so that every colour is read.
+        """
+        codes = self._codes or [code for _, code in self.config.all_codes()]
+        code = max(codes, key=lambda c: (len(set(c.ring + c.centre)), c.centre != 'K', str(c)))
+        cards = self.detect(drawn_cards(self.config, code))
+        return sum(1 for card in cards if card.code == code)
 
     # Cards -----------------------------------------------------------------
 

@@ -36,13 +36,13 @@ over the inner part of the dot at that shift, well clear of any neighbour.
 from dataclasses import dataclass
 from typing import Callable, List, Optional
 
-import cv2
 import numpy as np
 
 from .camera import CameraModel
 from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
 from .dots import DotImage
+from . import spot_kernels
 from .stats import median
 
 # Spots at least this big (semi-minor axis, image pixels) are measured on the
@@ -177,54 +177,32 @@ def plane_layout(points: np.ndarray, radii: np.ndarray, card_half: float,
 
 class _Windows:
     """
-    The windows of a group of spots, gathered at once from one image.
+    The windows of a group of spots, measured at once on one image.
 
     Coordinates are the source image's pixels relative to each window's
     integer origin (``base``); the source is the image (scale 1) or the
     image decimated by ``scale``, whose pixel (x, y) covers image pixels
-    ``scale * x .. scale * x + scale - 1``.
+    ``scale * x .. scale * x + scale - 1``. The passes over the windows'
+    pixels are :mod:`.spot_kernels`; their results are kept here.
     """
 
     def __init__(self, dot_image: DotImage, index: np.ndarray, scale: int,
                  pred: np.ndarray, axes: np.ndarray, semi: np.ndarray,
                  to_plane: np.ndarray) -> None:
         source = dot_image.image if scale == 1 else dot_image.small
-        h, w = source.shape[:2]
+        # Grey as one channel: one signature for the kernels.
+        self.source = source if source.ndim == 3 else source[:, :, None]
         self.index, self.scale = index, scale
         self.off = (scale - 1) / 2.0
         centre = (pred[index] - self.off) / scale
         self.semi = semi[index] / scale
         half = int(np.ceil(self.semi[:, 0].max())) + 2
-        size = 2 * half + 1
-        self.base = np.round(centre).astype(np.intp) - half              # window origin
-        j = np.arange(size)
-        bx, by = self.base[:, 0], self.base[:, 1]
-        if len(bx) and bx.min() >= 0 and by.min() >= 0 and bx.max() <= w - size \
-                and by.max() <= h - size:
-            # Every window inside the image (the usual case): views of the
-            # image copied at once, no index arrays.
-            self.in_image = np.ones((len(bx), size, size), dtype=bool)
-            # (y, x, row, column[, channel]): every window of the image, a view.
-            views = np.lib.stride_tricks.as_strided(
-                source, (h - size + 1, w - size + 1, size, size) + source.shape[2:],
-                source.strides[:2] + source.strides, writeable=False)
-            self.pixels = views[by, bx]                                  # (K, S, S[, 3])
-        else:
-            xs = bx[:, None, None] + j[None, None, :]
-            ys = by[:, None, None] + j[None, :, None]
-            self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-            self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
-        self.X = j.astype(np.float32)[None, None, :]
-        self.Y = j.astype(np.float32)[None, :, None]
-        self.axes = axes[index].astype(np.float32)
-        ax = self.axes
-        # Each pixel's coordinates along the spot's ellipse axes.
-        self.A0 = ax[:, 0, 0, None, None] * self.X + ax[:, 1, 0, None, None] * self.Y
-        self.B0 = ax[:, 0, 1, None, None] * self.X + ax[:, 1, 1, None, None] * self.Y
+        self.size = 2 * half + 1
+        self.base = np.round(centre).astype(np.int64) - half              # window origin
+        self.axes = np.ascontiguousarray(axes[index], dtype=np.float32)
         self.pred = centre - self.base
         self.c = self.pred.copy()
-        self.to_plane = (to_plane[index] * scale).astype(np.float32)     # metres per pixel
-        self._parts_key = None
+        self.to_plane = np.ascontiguousarray(to_plane[index] * scale, dtype=np.float32)
 
     def to_image(self, c: np.ndarray) -> np.ndarray:
         """Window coordinates (K, 2) -> image pixels."""
@@ -232,53 +210,8 @@ class _Windows:
 
     def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
         """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
-        key = c.tobytes()
-        if self._parts_key != key:
-            ax = self.axes
-            ca = (ax[:, 0, 0] * c[:, 0] + ax[:, 1, 0] * c[:, 1]).astype(np.float32)
-            cb = (ax[:, 0, 1] * c[:, 0] + ax[:, 1, 1] * c[:, 1]).astype(np.float32)
-            a = self.A0 - ca[:, None, None]
-            b = self.B0 - cb[:, None, None]
-            self._parts, self._parts_key = (a * a, b * b), key
-        a2, b2 = self._parts
-        sa = (1.0 / semi[:, 0] ** 2).astype(np.float32)[:, None, None]
-        sb = (1.0 / semi[:, 1] ** 2).astype(np.float32)[:, None, None]
-        return a2 * sa + b2 * sb
-
-    def plane(self, anchor: np.ndarray, anchor_xy: np.ndarray):
-        """Return each pixel's card-plane position; the spot at ``anchor`` is at ``anchor_xy``."""
-        m = self.to_plane
-        dx = self.X - anchor[:, 0, None, None].astype(np.float32)
-        dy = self.Y - anchor[:, 1, None, None].astype(np.float32)
-        qx = anchor_xy[:, 0, None, None].astype(np.float32) + m[:, 0, 0, None, None] * dx \
-            + m[:, 0, 1, None, None] * dy
-        qy = anchor_xy[:, 1, None, None].astype(np.float32) + m[:, 1, 0, None, None] * dx \
-            + m[:, 1, 1, None, None] * dy
-        return qx, qy
-
-    def cells(self, layout: PlaneLayout, spot: np.ndarray, anchor: np.ndarray) -> np.ndarray:
-        """Pixels whose place on the card belongs to each window's spot (a layout index)."""
-        qx, qy = self.plane(anchor, layout.points[spot])
-        n = layout.owner.shape[0]
-        col = ((qx + layout.half) / layout.resolution).astype(np.intp)
-        row = ((layout.half - qy) / layout.resolution).astype(np.intp)
-        inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
-        # One flat index into the raster: cheaper than a pair of index arrays.
-        owner = np.take(layout.owner.ravel(), np.clip(row, 0, n - 1) * n + np.clip(col, 0, n - 1))
-        return inside & (owner == spot[:, None, None]), qx, qy
-
-    def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """Weighted centroid of each window (``c`` where a window has no weight)."""
-        # Column and row sums: two passes over the windows instead of three
-        # products and three sums.
-        columns = weight.sum(axis=1)                                 # (K, S)
-        rows = weight.sum(axis=2)
-        total = columns.sum(axis=1)
-        good = total > 0
-        safe = np.where(good, total, 1.0)
-        cx = columns @ self.X[0, 0] / safe
-        cy = rows @ self.Y[0, :, 0] / safe
-        return np.where(good[:, None], np.column_stack([cx, cy]), c)
+        return spot_kernels.ellipse(self.axes, np.ascontiguousarray(c, dtype=np.float64),
+                                    np.ascontiguousarray(semi, dtype=np.float64), self.size)
 
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
@@ -356,43 +289,30 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
                 out: SpotMeasures, refine: bool = True) -> None:
     """Centroid in a generous window, and the tests of a dot, written into ``out``."""
     idx, s = g.index, g.scale
-    pixels = g.pixels
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
-    # Channel by channel: numpy's reduction over a last axis of three is slow.
-    dark = (pixels if pixels.ndim == 3 else np.minimum(np.minimum(
-        pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
-    sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
-    quiet = sigma if paper.quiet is None else np.minimum(sigma, np.float32(paper.quiet / s))
+    sigma = np.float32(paper.sigma / s)
+    quiet = sigma if paper.quiet is None else min(sigma, np.float32(paper.quiet / s))
+    # Darkness below the local white, less a floor that keeps paper noise out.
     floor = np.maximum(0.04 * level, 2.0 * quiet)
-    raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
-    weight = raw
-    mine, qx, qy = g.cells(layout, spots[idx], g.pred)
     # On the card, inside its edge by two image pixels (blur carries what is
     # beyond onto it)...
-    room_x = (layout.half - 2.0 * np.hypot(Linv[idx, 0, 0], Linv[idx, 0, 1])).astype(np.float32)
-    room_y = (layout.half - 2.0 * np.hypot(Linv[idx, 1, 0], Linv[idx, 1, 1])).astype(np.float32)
-    on_card = (np.abs(qx) < room_x[:, None, None]) & (np.abs(qy) < room_y[:, None, None])
+    room = (layout.half - 2.0 * np.hypot(Linv[idx, :, 0], Linv[idx, :, 1])).astype(np.float32)
     # ...but never closer than a pixel and a half round the spot itself: a
     # steep view brings the edge that close, and cutting the spot's own blur
     # would pull its centre.
-    own = g.ellipse(g.pred, np.column_stack([major[idx], minor[idx]]) / s + 1.5) <= 1.0
-    cell = g.in_image & mine & (on_card | own)
-    weight = weight * cell
+    own = np.column_stack([major[idx], minor[idx]]) / s + 1.5
     semi = g.semi
-    c = g.c
-    for _ in range(2):
-        c = g.centroid(weight * (g.ellipse(c, semi) <= 1.0), c)
-    e = g.ellipse(c, semi)
-    window = e <= 1.0
     # Peak darkness (3x3 mean) where the spot should be: a spot that is not
     # there drifts off towards whatever is dark nearby.
     core = np.minimum((major[idx] / s + core_margin / s) ** 2 / semi[:, 0] ** 2, 1.0)
-    top = (_box3(weight) * (g.ellipse(g.pred, semi) <= core[:, None, None])).max(axis=(1, 2))
-    rim = window & (e > 0.6) & cell
-    rim_mean = (weight * rim).sum(axis=(1, 2)) / np.maximum(rim.sum(axis=(1, 2)), 1)
-    wd = weight * window
-    mass = wd.sum(axis=(1, 2))
+    # The centroid (twice, the window re-centred) of the darkness in the
+    # window, shared with the neighbours as the card's plane is.
+    (g.pixels, g.in_image, raw, g.weight, g.cell, g.window, g.on_card, c, top, rim_mean, mass,
+     whole, spread) = spot_kernels.first_pass(
+        g.source, g.base, g.size, g.axes, g.pred, semi, own, core, g.to_plane,
+        layout.points[spots[idx]], spots[idx].astype(np.int64), layout.owner, layout.half,
+        layout.resolution, level, floor.astype(np.float32), room)
     equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
     expected = np.pi * major[idx] * minor[idx]
     relative = top / np.maximum(level, 1.0)
@@ -400,24 +320,17 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     isolated = rim_mean <= 0.3 * top
     sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
     # A window beyond the border: a spot cut by it has a false centre.
-    whole = (g.in_image | ~window).all(axis=(1, 2))
     out.inside[idx] = whole
     out.points[idx] = g.to_image(c)
     out.valid[idx] = whole & dark_enough & isolated & sized
-    g.tests = {'whole': whole, 'dark': dark_enough, 'isolated': isolated, 'sized': sized}
     out.peak[idx] = relative
     out.area[idx] = equivalent
-    g.c, g.cell, g.window = c, cell, window
-    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
+    g.c, g.top, g.sigma = c, top, sigma
     if not refine:
         return
     # Spread of each spot's darkness (image pixels^2), for the blur.
-    total = np.maximum(mass, 1e-6)
-    dx = g.X - c[:, 0, None, None].astype(np.float32)
-    dy = g.Y - c[:, 1, None, None].astype(np.float32)
-    g.spread = np.stack([(wd * dx * dx).sum(axis=(1, 2)), (wd * dx * dy).sum(axis=(1, 2)),
-                         (wd * dy * dy).sum(axis=(1, 2))], axis=1) / total[:, None] * (s * s)
-    g.raw = raw * g.in_image
+    g.spread = spread / np.maximum(mass, 1e-6)[:, None] * (s * s)
+    g.raw = raw
 
 
 def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
@@ -452,133 +365,52 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     The first windows were generous (the blur was unknown) and shared as the
     prediction put the spots; now they are shared about the measured centre.
     An object next to a dot, or the card's edge, would pull a centroid taken
-    in a generous window.
+    in a generous window. Dark things in the window apart from the dot (an
+    object a pixel or two away, a neighbour's blur) are not the dot's: its
+    own dark region is the connected one at its centre (dark: a quarter of
+    its peak; the region with the darkest pixel within a pixel and a half
+    of the centre).
+
+    A dot's image is point-symmetric, blurred or not (and so is the union of
+    its colour channels shifted opposite ways); a dot partly hidden, or
+    touched by an object, is not. Its asymmetry is compared where both a
+    pixel and its reflection through the centre (bilinear) belong to the
+    spot, so that sharing pixels with a close neighbour cuts both sides
+    alike: |w - reflected w| / (w + reflected w) summed, less what the pixel
+    noise alone gives (|difference of two noisy pixels| is 1.13 sigma on
+    average).
     """
     idx, s = g.index, g.scale
     axes = g.axes.astype(np.float64)
     # The blur's extent (2.5 sigma) along each dot's axes, plus a pixel.
-    ext = np.column_stack([np.sqrt(np.einsum('ki,ij,kj->k', axes[:, :, a], blur, axes[:, :, a]))
-                           for a in (0, 1)])
+    ext = np.sqrt(np.einsum('kia,ij,kja->ka', axes, blur, axes))
     tight = (np.column_stack([major[idx], minor[idx]]) + 2.5 * ext + 1.0) / s
-    c = g.c
-    mine = g.cells(layout, spots[idx], c)[0]
-    weight = g.raw * mine * g.on_card
-    # Dark things in the window apart from the dot (an object a pixel or
-    # two away, a neighbour's blur) are not the dot's: its own dark region is
-    # the connected one at its centre.
-    connected = _own_region(weight, g.top, c)
-    weight = weight * connected
-    g.connected = connected
-    for _ in range(2):
-        c = g.centroid(weight * (g.ellipse(c, tight) <= 1.0), c)
-    region = g.ellipse(c, tight) <= 1.0
+    # The inner part of the dot (ink is even there), round the prediction.
+    inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / s
+    c, g.connected, asymmetry, stained, beyond, mean, spread = spot_kernels.last_pass(
+        g.raw, g.on_card, g.weight, g.window, g.top, g.c, g.pred, g.axes, tight, inner, g.sigma,
+        g.to_plane, layout.points[spots[idx]], spots[idx].astype(np.int64), layout.owner,
+        layout.half, layout.resolution)
     out.points[idx] = g.to_image(c)
     steady = np.hypot(*(out.points[idx] - pred[idx]).T) <= np.maximum(1.5, 0.3 * major[idx] + 1.0)
     # Reflecting a dot a pixel or two thick by interpolation blurs it: more
     # room for thin dots.
     grid = 0.15 / np.maximum(minor[idx] / s, 0.5)
-    g.asymmetry = _asymmetry(g, weight, region & mine, c, g.sigma)
     # An object touching the dot joins its dark region beyond the dot and
     # its blur.
-    beyond = g.window & mine & (g.ellipse(c, tight + 1.0) > 1.0)
-    stained = np.count_nonzero(beyond & (weight > 0.25 * g.top[:, None, None]), axis=(1, 2))
-    touched = stained > 0.1 * np.count_nonzero(beyond, axis=(1, 2)) + 1
+    touched = stained > 0.1 * beyond + 1
     exists = out.valid[idx].copy()
-    out.valid[idx] &= steady & (g.asymmetry <= 0.08 + grid) & ~touched
-    g.tests.update(steady=steady, symmetric=g.asymmetry <= 0.08 + grid, untouched=~touched)
+    out.valid[idx] &= steady & (asymmetry <= 0.08 + grid) & ~touched
     # Its colour may still be read where the geometry may not: a dot touched
     # by an object, or with an object over part of its rim, has a clean
     # inner part (ink is even there). Too small a dot to tell: not read.
-    inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / s
-    core = (g.ellipse(g.pred, inner) <= 1.0) & mine
-    count = np.maximum(core.sum(axis=(1, 2)), 1)
-    mean = (g.weight * core).sum(axis=(1, 2)) / count
-    spread = np.sqrt(np.maximum((g.weight ** 2 * core).sum(axis=(1, 2)) / count - mean ** 2, 0))
     # Evenness against the dots that passed everything (same blur, same size).
     relative = spread / np.maximum(mean, 1e-6)
     typical = median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
         else 0.0
     even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
     out.readable[idx] = out.valid[idx] | (exists & steady & even)
-    g.tests.update(even=even, spread=relative)
     g.c = c
-
-
-def _asymmetry(g: _Windows, weight: np.ndarray, region: np.ndarray, c: np.ndarray,
-               sigma: np.ndarray) -> np.ndarray:
-    """
-    How far each spot's darkness is from point-symmetric about its centre, less the noise.
-
-    A dot's image is point-symmetric, blurred or not (and so is the union of
-    its colour channels shifted opposite ways); a dot partly hidden, or
-    touched by an object, is not. Compared where both a pixel and its
-    reflection belong to the spot, so that sharing pixels with a close
-    neighbour cuts both sides alike. Returns |w - reflected w| / (w +
-    reflected w) summed, less what the pixel noise alone gives (|difference
-    of two noisy pixels| is 1.13 sigma on average).
-    """
-    region = region.astype(np.float32)
-    both = region * (_point_reflection(region, c, nearest=True) > 0.5)
-    own = weight * both
-    mirror = _point_reflection(weight, c) * both
-    total = np.maximum((own + mirror).sum(axis=(1, 2)), 1e-6)
-    noise = 1.13 * sigma * np.count_nonzero(own > 0, axis=(1, 2)) / total
-    return np.abs(own - mirror).sum(axis=(1, 2)) / total - noise
-
-
-def _point_reflection(a: np.ndarray, c: np.ndarray, nearest: bool = False) -> np.ndarray:
-    """
-    Each (K, S, S) window reflected through its point ``c`` (window coordinates); 0 outside.
-
-    Bilinear (the interpolation weights are the same for every pixel of a
-    window, and separable: rows, then columns), or to the nearest pixel.
-    """
-    k, s, _ = a.shape
-    j = np.arange(s)
-    rows = np.arange(k)[:, None]
-    out = a
-    for axis, coord in ((1, c[:, 1]), (2, c[:, 0])):
-        pos = 2.0 * coord[:, None] - j[None, :]                        # (K, S)
-        base = np.floor(pos + (0.5 if nearest else 0.0)).astype(np.intp)
-        shape = (k, s, 1) if axis == 1 else (k, 1, s)
-        # Whole rows (or columns, transposed) gathered from the window padded
-        # with a zero on each side: an index off the window reads a zero.
-        padded = np.zeros((k, s + 2, s), dtype=out.dtype)
-        padded[:, 1:s + 1] = out if axis == 1 else out.transpose(0, 2, 1)
-
-        def pick(index, padded=padded, axis=axis):
-            got = padded[rows, np.clip(index, -1, s) + 1]
-            return got if axis == 1 else got.transpose(0, 2, 1)
-
-        if nearest:
-            out = pick(base)
-        else:
-            f = (pos - base).astype(np.float32).reshape(shape)
-            out = (1 - f) * pick(base) + f * pick(base + 1)
-    return out
-
-
-def _own_region(weight: np.ndarray, top: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """
-    Mask (K, S, S) of each window less the dark regions not connected to its centre.
-
-    Dark is a quarter of the spot's peak; light pixels (the dot's blurred
-    rim, paper) are kept. The spot's region is the one with the darkest
-    pixel within a pixel and a half of its centre. All windows are labelled
-    in one call, stacked with a blank row between them.
-    """
-    k, s, _ = weight.shape
-    dark = weight > 0.25 * np.maximum(top, 1e-6)[:, None, None]
-    stack = np.zeros((k, s + 1, s), dtype=np.uint8)
-    stack[:, :s] = dark
-    _, labels = cv2.connectedComponents(stack.reshape(k * (s + 1), s), connectivity=8)
-    labels = labels.reshape(k, s + 1, s)[:, :s]
-    j = np.arange(s)
-    near = (np.abs(j[None, None, :] - c[:, 0, None, None]) <= 1.5) \
-        & (np.abs(j[None, :, None] - c[:, 1, None, None]) <= 1.5)
-    best = np.argmax((weight * near).reshape(k, -1), axis=1)
-    own = labels.reshape(k, -1)[np.arange(k), best]
-    return ~((labels > 0) & (labels != own[:, None, None]))
 
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
@@ -594,42 +426,29 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     are left out, so no neighbour's or object's colour comes in.
     """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
-    table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
+    table = np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma,
+                                 dtype=np.float32)                                 # (256, 3)
     n = len(out.valid)
     channel_at = np.full((n, 3, 2), np.nan)
     strength = np.zeros((n, 3))
     for g in groups:
         idx = g.index
-        k, size = g.pixels.shape[:2]
-        # A lookup table per channel (OpenCV's LUT: one pass, no index arrays).
-        d = cv2.LUT(g.pixels.reshape(k * size, size, 3),
-                    table.reshape(256, 1, 3)).reshape(g.pixels.shape)           # (K, S, S, 3)
-        # Where each channel's image of the dot is.
-        w = np.maximum(d - 0.1, 0.0) * (g.cell & g.window & g.connected)[..., None]
-        total = np.maximum(w.sum(axis=(1, 2)), 1e-6)                            # (K, 3)
-        cx = np.einsum('kijc,j->kc', w, g.X[0, 0]) / total
-        cy = np.einsum('kijc,i->kc', w, g.Y[0, :, 0]) / total
-        channel_at[idx] = (np.stack([cx, cy], axis=-1) + g.base[:, None, :]) * g.scale + g.off
-        strength[idx] = total
-        smooth = cv2.blur(np.ascontiguousarray(d.reshape(k * size, size, 3)), (3, 3),
-                          borderType=cv2.BORDER_REPLICATE).reshape(d.shape)
-        # The dot's inner part grown by the shift, clear of anything beside
-        # the dot; for a dot touched by something, not grown (and around
-        # where it should be).
+        # Where each channel's image of the dot is: the centroid of its
+        # darkness (above 0.1) in the window. The dot's inner part grown by
+        # the shift, clear of anything beside the dot; for a dot touched by
+        # something, not grown (and around where it should be).
         sure = out.valid[idx][:, None]
         inner = 0.6 * np.column_stack([major[idx], minor[idx]]) + 0.7
         grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
         at = np.where(sure, g.c, g.pred)
-        core = (g.ellipse(at, grown) <= 1.0) & g.cell & g.connected
-        out.colour[idx] = (smooth * core[..., None]).reshape(k, size * size, 3).max(axis=1)
+        linked = g.cell & g.connected
+        smooth, centroid, strength[idx], out.colour[idx], spread = spot_kernels.colours(
+            g.pixels, table, linked & g.window, linked, g.axes, at, grown)
+        channel_at[idx] = (centroid + g.base[:, None, :]) * g.scale + g.off
         # A dot read for its colour alone must be even in every channel
         # there, as the sure dots are: not half ink, half something else.
         doubtful = out.readable[idx] & ~out.valid[idx]
         if np.any(doubtful):
-            count = np.maximum(core.sum(axis=(1, 2)), 1)[:, None]
-            mean = (d * core[..., None]).sum(axis=(1, 2)) / count
-            var = (d * d * core[..., None]).sum(axis=(1, 2)) / count - mean ** 2
-            spread = np.sqrt(np.maximum(var, 0.0)).max(axis=1)
             typical = median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
@@ -713,10 +532,3 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
         return
     bias = (dark[:, :, None] * shift[None]).sum(axis=1) / np.maximum(dark.sum(axis=1), 1)[:, None]
     out.points[:] = out.points - bias
-
-
-def _box3(a: np.ndarray) -> np.ndarray:
-    """3x3 mean of each (K, S, S) window (edges: the window's own pixels only)."""
-    k, s, _ = a.shape
-    flat = np.ascontiguousarray(a.reshape(k * s, s), dtype=np.float32)
-    return cv2.blur(flat, (3, 3), borderType=cv2.BORDER_REPLICATE).reshape(k, s, s)

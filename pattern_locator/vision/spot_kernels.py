@@ -1,0 +1,525 @@
+"""
+Compiled per-pixel passes of the sub-pixel centres (:mod:`.centres`).
+
+The centres stage measures a card's 17 dots in windows of some 25 x 25
+pixels. As numpy calls over all of a card's windows at once, its time was
+the fixed cost of a few hundred small calls per card, not the pixels; here
+each pass over a group of windows is one call that loops over the windows,
+then their pixels. What is measured, and why, is :mod:`.centres`'s
+documentation; these kernels only do its arithmetic.
+
+The per-pixel quantities are computed in float32 in the same order as the
+numpy code they replace (so that a pixel on an ellipse's edge or a
+threshold falls on the same side), the sums over a window in float64.
+
+numba checks no bounds: every index computed here is tested against the
+window's size or clipped to the image's shape before use. The caller
+validates the geometry (finite, windows no bigger than a quarter of the
+image) before calling.
+"""
+
+import numba
+import numpy as np
+
+_F32 = np.float32
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _ellipse_origin(axes, k, c0, c1):
+    """Window point (c0, c1) along window ``k``'s ellipse axes, float32 (as the numpy code)."""
+    ca = _F32(np.float64(axes[k, 0, 0]) * c0 + np.float64(axes[k, 1, 0]) * c1)
+    cb = _F32(np.float64(axes[k, 0, 1]) * c0 + np.float64(axes[k, 1, 1]) * c1)
+    return ca, cb
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _inverse_squares(s0, s1):
+    """1 / semi-axis^2 along both axes, float32."""
+    return _F32(1.0 / (s0 * s0)), _F32(1.0 / (s1 * s1))
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _ellipse_at(axes, k, x, y, ca, cb, sa, sb):
+    """Normalised squared radius (1 on the edge) of pixel (x, y) of window ``k``."""
+    xf, yf = _F32(x), _F32(y)
+    a = axes[k, 0, 0] * xf + axes[k, 1, 0] * yf - ca
+    b = axes[k, 0, 1] * xf + axes[k, 1, 1] * yf - cb
+    return a * a * sa + b * b * sb
+
+
+@numba.njit(cache=True, nogil=True)
+def ellipse(axes, c, semi, size):
+    """
+    Normalised squared radius (K, S, S) of every pixel of every window.
+
+    ``axes`` (K, 2, 2) float32: each window's ellipse axes as columns;
+    ``c`` (K, 2): centres (window coordinates); ``semi`` (K, 2): semi-axes.
+    """
+    k_count = axes.shape[0]
+    out = np.empty((k_count, size, size), dtype=np.float32)
+    for k in range(k_count):
+        ca, cb = _ellipse_origin(axes, k, c[k, 0], c[k, 1])
+        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
+        for y in range(size):
+            for x in range(size):
+                out[k, y, x] = _ellipse_at(axes, k, x, y, ca, cb, sa, sb)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0):
+    """Card-plane position (float32) of pixel (x, y); window point (ax0, ay0) is (qx0, qy0)."""
+    dx = _F32(x) - ax0
+    dy = _F32(y) - ay0
+    qx = qx0 + to_plane[k, 0, 0] * dx + to_plane[k, 0, 1] * dy
+    qy = qy0 + to_plane[k, 1, 0] * dx + to_plane[k, 1, 1] * dy
+    return qx, qy
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _owned(owner, spot, qx, qy, half, resolution):
+    """Whether card-plane point (qx, qy) lies in the raster cell of layout spot ``spot``."""
+    n = owner.shape[0]
+    col = (qx + half) / resolution
+    row = (half - qy) / resolution
+    # The numpy code truncated towards zero: inside when -1 < value < n.
+    # (NaN compares false: outside.) Only then is the value an index.
+    if not (col > -1.0 and col < n and row > -1.0 and row < n):
+        return False
+    return owner[int(row), int(col)] == spot
+
+
+@numba.njit(cache=True, nogil=True)
+def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, anchor_xy,
+               spot, owner, half, resolution, level, floor, room):
+    """
+    Gather each window's pixels and take the first, generous centroid.
+
+    ``source`` (h, w, C) uint8, the image or the decimated image (C = 3, or
+    1 for grey); window ``k`` covers its pixels ``base[k] .. base[k] + size
+    - 1`` (x, y), clipped to the image (``in_image`` tells which are in it).
+    Per window: ``pred`` the predicted centre, ``semi`` the window's
+    semi-axes and ``own_semi`` the spot's own (grown for blur) along
+    ``axes``; ``core`` the squared part of the window where the peak is
+    looked for; ``to_plane`` (metres per pixel) and ``anchor_xy`` (the
+    spot's place on the card, at ``pred``); ``spot`` its index in the
+    layout's ``owner`` raster (``half``, ``resolution``: the raster's
+    geometry); ``level`` the local white and ``floor`` the darkness floor;
+    ``room`` how far (card metres, x and y) from the card's centre a pixel
+    is on the card.
+
+    Returns pixels, in_image, raw (darkness below the floor, 0 off the
+    image), weight (raw in the spot's cell), cell, window, on_card (on the
+    card or within the spot's own ellipse), centres (K, 2), top (peak 3x3
+    mean darkness round the prediction), rim_mean, mass, whole (window
+    inside the image) and spread (K, 3: xx, xy, yy second moments).
+    """
+    k_count = base.shape[0]
+    h, w, channels = source.shape
+    shape = (k_count, size, size)
+    pixels = np.empty((k_count, size, size, channels), dtype=np.uint8)
+    in_image = np.empty(shape, dtype=np.bool_)
+    raw = np.empty(shape, dtype=np.float32)
+    weight = np.empty(shape, dtype=np.float32)
+    cell = np.empty(shape, dtype=np.bool_)
+    window = np.empty(shape, dtype=np.bool_)
+    on_card = np.empty(shape, dtype=np.bool_)
+    centres = np.empty((k_count, 2))
+    top = np.zeros(k_count, dtype=np.float32)
+    rim_mean = np.empty(k_count)
+    mass = np.empty(k_count)
+    whole = np.empty(k_count, dtype=np.bool_)
+    spread = np.empty((k_count, 3))
+    half32, resolution32 = _F32(half), _F32(resolution)
+    e = np.empty((size, size), dtype=np.float32)
+    for k in range(k_count):
+        bx, by = base[k, 0], base[k, 1]
+        clear = level[k] - floor[k]
+        ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
+        qx0, qy0 = _F32(anchor_xy[k, 0]), _F32(anchor_xy[k, 1])
+        ca, cb = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
+        oa, ob = _inverse_squares(own_semi[k, 0], own_semi[k, 1])
+        for y in range(size):
+            v = by + y
+            vc = min(max(v, 0), h - 1)
+            for x in range(size):
+                u = bx + x
+                uc = min(max(u, 0), w - 1)
+                darkest = np.uint8(255)
+                for ch in range(channels):
+                    p = source[vc, uc, ch]
+                    pixels[k, y, x, ch] = p
+                    darkest = min(darkest, p)
+                inside = u >= 0 and u < w and v >= 0 and v < h
+                in_image[k, y, x] = inside
+                r = max(clear - _F32(darkest), _F32(0.0))
+                raw[k, y, x] = r if inside else _F32(0.0)
+                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+                mine = _owned(owner, spot[k], qx, qy, half32, resolution32)
+                # On the card inside its edge, or within the spot's own
+                # ellipse grown for blur (see centres._first_pass).
+                card = (abs(qx) < room[k, 0] and abs(qy) < room[k, 1]) \
+                    or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0
+                on_card[k, y, x] = card
+                cell[k, y, x] = inside and mine and card
+                weight[k, y, x] = r if inside and mine and card else _F32(0.0)
+        # The centroid twice, in the window round the latest centre.
+        c0, c1 = pred[k, 0], pred[k, 1]
+        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
+        for _ in range(2):
+            c0, c1 = _centroid(weight[k], axes, k, c0, c1, sa, sb)
+        centres[k, 0], centres[k, 1] = c0, c1
+        ea, eb = _ellipse_origin(axes, k, c0, c1)
+        for y in range(size):
+            for x in range(size):
+                e[y, x] = _ellipse_at(axes, k, x, y, ea, eb, sa, sb)
+        # Peak: the largest 3x3 mean within the core round the prediction.
+        peak = _F32(0.0)
+        for y in range(size):
+            for x in range(size):
+                if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= core[k]:
+                    peak = max(peak, _box3_at(weight[k], x, y))
+        top[k] = peak
+        rim_sum, rim_count, total, out = 0.0, 0, 0.0, False
+        sxx, sxy, syy = 0.0, 0.0, 0.0
+        fc0, fc1 = _F32(c0), _F32(c1)
+        for y in range(size):
+            for x in range(size):
+                inside_window = e[y, x] <= 1.0
+                window[k, y, x] = inside_window
+                if not inside_window:
+                    continue
+                out = out or not in_image[k, y, x]
+                wd = weight[k, y, x]
+                total += wd
+                if e[y, x] > _F32(0.6) and cell[k, y, x]:
+                    rim_sum += wd
+                    rim_count += 1
+                dx = _F32(x) - fc0
+                dy = _F32(y) - fc1
+                sxx += wd * dx * dx
+                sxy += wd * dx * dy
+                syy += wd * dy * dy
+        rim_mean[k] = rim_sum / max(rim_count, 1)
+        mass[k] = total
+        whole[k] = not out
+        spread[k, 0], spread[k, 1], spread[k, 2] = sxx, sxy, syy
+    return (pixels, in_image, raw, weight, cell, window, on_card, centres, top, rim_mean, mass,
+            whole, spread)
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _centroid(weight, axes, k, c0, c1, sa, sb):
+    """Weighted centroid of one window's ``weight`` within its ellipse about (c0, c1)."""
+    size = weight.shape[0]
+    ca, cb = _ellipse_origin(axes, k, c0, c1)
+    total, sx, sy = 0.0, 0.0, 0.0
+    for y in range(size):
+        for x in range(size):
+            if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0:
+                wv = weight[y, x]
+                total += wv
+                sx += wv * x
+                sy += wv * y
+    if total > 0.0:
+        return sx / total, sy / total
+    return c0, c1
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _box3_at(a, x, y):
+    """3x3 mean of (S, S) ``a`` at (x, y), the window's edge pixels repeated beyond it."""
+    size = a.shape[0]
+    total = 0.0
+    for dy in range(-1, 2):
+        yy = min(max(y + dy, 0), size - 1)
+        for dx in range(-1, 2):
+            xx = min(max(x + dx, 0), size - 1)
+            total += a[yy, xx]
+    # As OpenCV's box filter: a double sum times 1/9, rounded to float32.
+    return _F32(total * (1.0 / 9.0))
+
+
+@numba.njit(cache=True, nogil=True)
+def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tight, inner, sigma,
+              to_plane, anchor_xy, spot, owner, half, resolution):
+    """
+    Centroid again in a tight window, the dark region joined to the dot alone; the dot tests.
+
+    ``raw``, ``on_card``, ``first_weight``, ``window``, ``top`` and
+    ``centres`` are :func:`first_pass`'s; the windows are shared about
+    ``centres`` now (``to_plane``, ``anchor_xy``, ``spot``, ``owner``,
+    ``half``, ``resolution`` as there). ``tight`` (K, 2): the semi-axes of
+    the dot and its blur; ``inner`` those of its inner part (round
+    ``pred``); ``sigma`` the pixel noise.
+
+    Returns the centres (K, 2), the connected mask (K, S, S), asymmetry
+    (K,), the count of dark pixels ``stained`` beyond the dot and its blur
+    and of all pixels there (``beyond``), and the mean and spread of the
+    first weight over the inner part.
+    """
+    k_count, size = raw.shape[0], raw.shape[1]
+    shape = (k_count, size, size)
+    connected = np.empty(shape, dtype=np.bool_)
+    out_c = np.empty((k_count, 2))
+    asymmetry = np.empty(k_count)
+    stained = np.empty(k_count, dtype=np.int64)
+    beyond = np.empty(k_count, dtype=np.int64)
+    core_mean = np.empty(k_count)
+    core_spread = np.empty(k_count)
+    half32, resolution32 = _F32(half), _F32(resolution)
+    mine = np.empty((size, size), dtype=np.bool_)
+    weight = np.empty((size, size), dtype=np.float32)
+    dark = np.empty((size, size), dtype=np.bool_)
+    region = np.empty((size, size), dtype=np.bool_)
+    stack = np.empty(size * size, dtype=np.int64)
+    rows = np.empty((size, size), dtype=np.float32)
+    for k in range(k_count):
+        c0, c1 = centres[k, 0], centres[k, 1]
+        ax0, ay0 = _F32(c0), _F32(c1)
+        qx0, qy0 = _F32(anchor_xy[k, 0]), _F32(anchor_xy[k, 1])
+        threshold = _F32(0.25) * max(top[k], _F32(1e-6))
+        for y in range(size):
+            for x in range(size):
+                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+                m = _owned(owner, spot[k], qx, qy, half32, resolution32)
+                mine[y, x] = m
+                wv = raw[k, y, x] if m and on_card[k, y, x] else _F32(0.0)
+                weight[y, x] = wv
+                dark[y, x] = wv > threshold
+        # Dark things apart from the dot are not the dot's: its own dark
+        # region (8-connected) is the one with the darkest pixel within a
+        # pixel and a half of the centre (the first such, row by row).
+        best, best_value = 0, _F32(-1.0)
+        for y in range(size):
+            for x in range(size):
+                near = abs(x - c0) <= 1.5 and abs(y - c1) <= 1.5
+                value = weight[y, x] if near else _F32(0.0)
+                if value > best_value:
+                    best, best_value = y * size + x, value
+        for y in range(size):
+            for x in range(size):
+                connected[k, y, x] = not dark[y, x]
+        if dark[best // size, best % size]:
+            _flood(dark, connected[k], best, stack)
+        for y in range(size):
+            for x in range(size):
+                if not connected[k, y, x]:
+                    weight[y, x] = _F32(0.0)
+        sa, sb = _inverse_squares(tight[k, 0], tight[k, 1])
+        for _ in range(2):
+            c0, c1 = _centroid(weight, axes, k, c0, c1, sa, sb)
+        out_c[k, 0], out_c[k, 1] = c0, c1
+        ca, cb = _ellipse_origin(axes, k, c0, c1)
+        ga, gb = _inverse_squares(tight[k, 0] + 1.0, tight[k, 1] + 1.0)
+        threshold = _F32(0.25) * top[k]
+        n_stained, n_beyond = 0, 0
+        for y in range(size):
+            for x in range(size):
+                region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
+                if window[k, y, x] and mine[y, x] \
+                        and _ellipse_at(axes, k, x, y, ca, cb, ga, gb) > 1.0:
+                    n_beyond += 1
+                    if weight[y, x] > threshold:
+                        n_stained += 1
+        stained[k], beyond[k] = n_stained, n_beyond
+        asymmetry[k] = _asymmetry(weight, region, c0, c1, sigma, rows)
+        # The first weight over the inner part round the prediction.
+        ia, ib = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
+        sa, sb = _inverse_squares(inner[k, 0], inner[k, 1])
+        count, total, squares = 0, 0.0, 0.0
+        for y in range(size):
+            for x in range(size):
+                if mine[y, x] and _ellipse_at(axes, k, x, y, ia, ib, sa, sb) <= 1.0:
+                    wv = first_weight[k, y, x]
+                    count += 1
+                    total += wv
+                    squares += wv * wv
+        count = max(count, 1)
+        mean = total / count
+        core_mean[k] = mean
+        core_spread[k] = np.sqrt(max(squares / count - mean * mean, 0.0))
+    return out_c, connected, asymmetry, stained, beyond, core_mean, core_spread
+
+
+@numba.njit(cache=True, nogil=True)
+def _flood(dark, keep, start, stack):
+    """Set ``keep`` over the 8-connected region of ``dark`` holding flat index ``start``."""
+    size = dark.shape[0]
+    keep[start // size, start % size] = True
+    stack[0] = start
+    depth = 1
+    while depth > 0:
+        depth -= 1
+        y, x = stack[depth] // size, stack[depth] % size
+        for yy in range(max(y - 1, 0), min(y + 2, size)):
+            for xx in range(max(x - 1, 0), min(x + 2, size)):
+                # A pixel goes on the stack once (kept first): the stack
+                # never holds more than the window's pixels.
+                if dark[yy, xx] and not keep[yy, xx]:
+                    keep[yy, xx] = True
+                    stack[depth] = yy * size + xx
+                    depth += 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _asymmetry(weight, region, c0, c1, sigma, rows):
+    """
+    How far ``weight`` is from point-symmetric about (c0, c1), less the noise.
+
+    As :func:`point_reflection` (nearest for ``region``, bilinear for
+    ``weight``), over the pixels of ``region`` whose reflection is in it
+    too; ``rows`` is scratch (S, S) float32.
+    """
+    size = weight.shape[0]
+    _reflect_rows(weight, c1, rows)
+    total, difference, count = 0.0, 0.0, 0
+    for y in range(size):
+        for x in range(size):
+            if not region[y, x]:
+                continue
+            ny = int(np.floor(2.0 * c1 - y + 0.5))
+            nx = int(np.floor(2.0 * c0 - x + 0.5))
+            if ny < 0 or ny >= size or nx < 0 or nx >= size or not region[ny, nx]:
+                continue
+            own = weight[y, x]
+            mirror = _reflect_column(rows, y, x, c0)
+            total += own + mirror
+            difference += abs(own - mirror)
+            if own > 0.0:
+                count += 1
+    # Sums as float32 would hold them, then as the numpy code combined them.
+    total = max(total, 1e-6)
+    noise = np.float64(_F32(1.13) * sigma) * count / total
+    return difference / total - noise
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _reflect_rows(a, c1, rows):
+    """Rows of (S, S) ``a`` reflected through row ``c1``, bilinear, into ``rows`` (0 beyond)."""
+    size = a.shape[0]
+    for y in range(size):
+        pos = 2.0 * c1 - y
+        b = np.floor(pos)
+        f = _F32(pos - b)
+        i = int(b) if abs(b) < 2 * size + 2 else -2
+        for x in range(size):
+            r0 = a[i, x] if 0 <= i < size else _F32(0.0)
+            r1 = a[i + 1, x] if 0 <= i + 1 < size else _F32(0.0)
+            rows[y, x] = (_F32(1.0) - f) * r0 + f * r1
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _reflect_column(rows, y, x, c0):
+    """Pixel (x, y) of the row-reflected ``rows`` reflected through column ``c0``, bilinear."""
+    size = rows.shape[0]
+    pos = 2.0 * c0 - x
+    b = np.floor(pos)
+    f = _F32(pos - b)
+    i = int(b) if abs(b) < 2 * size + 2 else -2
+    r0 = rows[y, i] if 0 <= i < size else _F32(0.0)
+    r1 = rows[y, i + 1] if 0 <= i + 1 < size else _F32(0.0)
+    return (_F32(1.0) - f) * r0 + f * r1
+
+
+@numba.njit(cache=True, nogil=True)
+def point_reflection(a, c, nearest):
+    """
+    Each (K, S, S) window of float32 ``a`` reflected through its point ``c``; 0 beyond it.
+
+    Bilinear (rows, then columns, as the interpolation is separable), or to
+    the nearest pixel (``nearest``: halves rounded up).
+    """
+    k_count, size = a.shape[0], a.shape[1]
+    out = np.zeros_like(a)
+    rows = np.empty((size, size), dtype=np.float32)
+    for k in range(k_count):
+        if nearest:
+            for y in range(size):
+                ny = int(np.floor(2.0 * c[k, 1] - y + 0.5))
+                for x in range(size):
+                    nx = int(np.floor(2.0 * c[k, 0] - x + 0.5))
+                    if 0 <= ny < size and 0 <= nx < size:
+                        out[k, y, x] = a[k, ny, nx]
+        else:
+            _reflect_rows(a[k], c[k, 1], rows)
+            for y in range(size):
+                for x in range(size):
+                    out[k, y, x] = _reflect_column(rows, y, x, c[k, 0])
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def colours(pixels, table, mask, core_mask, axes, at, grown):
+    """
+    Per-channel darkness of each window's dot: where each channel's image is, and its peak.
+
+    ``pixels`` (K, S, S, 3) uint8 and ``table`` (256, 3) float32, each
+    level's darkness per channel. The channels' centroids are taken over
+    ``mask`` (darkness above 0.1); the peak of the 3x3 mean darkness, and
+    the mean and spread of the darkness, over ``core_mask`` within the
+    ellipse ``grown`` round ``at``.
+
+    Returns the smoothed darkness (K, S, S, 3), each channel's centroid
+    (K, 3, 2, window coordinates) and weight (K, 3), the peak (K, 3; 0
+    where the core is empty) and the largest channel spread (K,) in the core.
+    """
+    k_count, size = pixels.shape[0], pixels.shape[1]
+    dark = np.empty((size, size, 3), dtype=np.float32)
+    smooth = np.empty((k_count, size, size, 3), dtype=np.float32)
+    centroid = np.empty((k_count, 3, 2))
+    strength = np.empty((k_count, 3))
+    peak = np.zeros((k_count, 3))
+    spread = np.empty(k_count)
+    for k in range(k_count):
+        total = np.zeros(3)
+        sx = np.zeros(3)
+        sy = np.zeros(3)
+        for y in range(size):
+            for x in range(size):
+                for ch in range(3):
+                    d = table[pixels[k, y, x, ch], ch]
+                    dark[y, x, ch] = d
+                    if mask[k, y, x]:
+                        wv = max(d - _F32(0.1), _F32(0.0))
+                        total[ch] += wv
+                        sx[ch] += wv * x
+                        sy[ch] += wv * y
+        for ch in range(3):
+            t = max(total[ch], 1e-6)
+            strength[k, ch] = t
+            centroid[k, ch, 0], centroid[k, ch, 1] = sx[ch] / t, sy[ch] / t
+        # 3x3 mean with the window's edge pixels repeated (as OpenCV's
+        # blur with BORDER_REPLICATE on the window alone).
+        for y in range(size):
+            for x in range(size):
+                for ch in range(3):
+                    acc = 0.0
+                    for dy in range(-1, 2):
+                        yy = min(max(y + dy, 0), size - 1)
+                        for dx in range(-1, 2):
+                            xx = min(max(x + dx, 0), size - 1)
+                            acc += dark[yy, xx, ch]
+                    smooth[k, y, x, ch] = _F32(acc * (1.0 / 9.0))
+        ca, cb = _ellipse_origin(axes, k, at[k, 0], at[k, 1])
+        sa, sb = _inverse_squares(grown[k, 0], grown[k, 1])
+        count = 0
+        mean = np.zeros(3)
+        squares = np.zeros(3)
+        for y in range(size):
+            for x in range(size):
+                if not core_mask[k, y, x] or _ellipse_at(axes, k, x, y, ca, cb, sa, sb) > 1.0:
+                    continue
+                count += 1
+                for ch in range(3):
+                    peak[k, ch] = max(peak[k, ch], smooth[k, y, x, ch])
+                    d = dark[y, x, ch]
+                    mean[ch] += d
+                    squares[ch] += d * d
+        count = max(count, 1)
+        widest = 0.0
+        for ch in range(3):
+            m = mean[ch] / count
+            widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
+        spread[k] = widest
+    return smooth, centroid, strength, peak, spread

@@ -442,7 +442,7 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
         grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
         at = np.where(sure, g.c, g.pred)
         linked = g.cell & g.connected
-        smooth, centroid, strength[idx], out.colour[idx], spread = spot_kernels.colours(
+        dark, centroid, strength[idx], out.colour[idx], spread = spot_kernels.colours(
             g.pixels, table, linked & g.window, linked, g.axes, at, grown)
         channel_at[idx] = (centroid + g.base[:, None, :]) * g.scale + g.off
         # A dot read for its colour alone must be even in every channel
@@ -452,11 +452,11 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             typical = median(spread[out.valid[idx]]) if np.count_nonzero(
                 out.valid[idx]) >= 3 else 0.0
             out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
-        _uncovered_part(g, smooth, major, minor, out)
+        _uncovered_part(g, dark, major, minor, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
 
 
-def _uncovered_part(g: _Windows, smooth: np.ndarray, major: np.ndarray, minor: np.ndarray,
+def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,
                     out: SpotMeasures) -> None:
     """
     Colour of dots partly covered by an object, from the part of them that shows.
@@ -485,7 +485,7 @@ def _uncovered_part(g: _Windows, smooth: np.ndarray, major: np.ndarray, minor: n
         inner = cell & (e <= max((b - 1.5) / b, 0.4) ** 2)
         # Where paper should be: round the dot beyond its blur, on the card.
         ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
-        pix = smooth[j]                                       # (S, S, 3) darkness
+        pix = spot_kernels.box3(dark[j])                      # (S, S, 3) 3x3 mean darkness
         strength = pix.max(axis=2)
         if np.count_nonzero(inner) < 6:
             continue

@@ -47,6 +47,38 @@ def _ellipse_at(axes, k, x, y, ca, cb, sa, sb):
     return a * a * sa + b * b * sb
 
 
+@numba.njit(cache=True, nogil=True, inline='always')
+def _span(axes, k, c0, c1, s0, s1, size):
+    """
+    Pixel ranges (x from, x to, y from, y to; ends excluded) holding an ellipse.
+
+    The ellipse of semi-axes (s0, s1) along window ``k``'s axes round (c0,
+    c1), with a pixel to spare (the float32 radius is tested on each pixel
+    of the span as on every pixel of the window): loops over it instead of
+    the whole window.
+    """
+    ex = np.sqrt((s0 * axes[k, 0, 0]) ** 2 + (s1 * axes[k, 0, 1]) ** 2) + 1.0
+    ey = np.sqrt((s0 * axes[k, 1, 0]) ** 2 + (s1 * axes[k, 1, 1]) ** 2) + 1.0
+    return (_start(c0 - ex, size), _stop(c0 + ex, size),
+            _start(c1 - ey, size), _stop(c1 + ey, size))
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _start(v, size):
+    """First index of a range from ``v`` (at least 0; all of it if ``v`` is NaN)."""
+    if not v > 0.0:
+        return 0
+    return size if v >= size else int(v)
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _stop(v, size):
+    """End (excluded) of a range up to ``v`` (at most ``size``; all of it if ``v`` is NaN)."""
+    if not v < size - 1.0:
+        return size
+    return 0 if v < -1.0 else int(v) + 2
+
+
 @numba.njit(cache=True, nogil=True)
 def ellipse(axes, c, semi, size):
     """
@@ -131,7 +163,6 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
     whole = np.empty(k_count, dtype=np.bool_)
     spread = np.empty((k_count, 3))
     half32, resolution32 = _F32(half), _F32(resolution)
-    e = np.empty((size, size), dtype=np.float32)
     for k in range(k_count):
         bx, by = base[k, 0], base[k, 1]
         clear = level[k] - floor[k]
@@ -165,34 +196,36 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
                 weight[k, y, x] = r if inside and mine and card else _F32(0.0)
         # The centroid twice, in the window round the latest centre.
         c0, c1 = pred[k, 0], pred[k, 1]
-        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
         for _ in range(2):
-            c0, c1 = _centroid(weight[k], axes, k, c0, c1, sa, sb)
+            c0, c1 = _centroid(weight[k], axes, k, c0, c1, semi[k, 0], semi[k, 1])
         centres[k, 0], centres[k, 1] = c0, c1
-        ea, eb = _ellipse_origin(axes, k, c0, c1)
-        for y in range(size):
-            for x in range(size):
-                e[y, x] = _ellipse_at(axes, k, x, y, ea, eb, sa, sb)
         # Peak: the largest 3x3 mean within the core round the prediction.
+        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
+        reach = np.sqrt(core[k])
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], reach * semi[k, 0],
+                               reach * semi[k, 1], size)
         peak = _F32(0.0)
-        for y in range(size):
-            for x in range(size):
+        for y in range(y0, y1):
+            for x in range(x0, x1):
                 if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= core[k]:
                     peak = max(peak, _box3_at(weight[k], x, y))
         top[k] = peak
         rim_sum, rim_count, total, out = 0.0, 0, 0.0, False
         sxx, sxy, syy = 0.0, 0.0, 0.0
         fc0, fc1 = _F32(c0), _F32(c1)
-        for y in range(size):
-            for x in range(size):
-                inside_window = e[y, x] <= 1.0
-                window[k, y, x] = inside_window
-                if not inside_window:
+        ea, eb = _ellipse_origin(axes, k, c0, c1)
+        window[k] = False
+        x0, x1, y0, y1 = _span(axes, k, c0, c1, semi[k, 0], semi[k, 1], size)
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                e = _ellipse_at(axes, k, x, y, ea, eb, sa, sb)
+                if not e <= 1.0:
                     continue
+                window[k, y, x] = True
                 out = out or not in_image[k, y, x]
                 wd = weight[k, y, x]
                 total += wd
-                if e[y, x] > _F32(0.6) and cell[k, y, x]:
+                if e > _F32(0.6) and cell[k, y, x]:
                     rim_sum += wd
                     rim_count += 1
                 dx = _F32(x) - fc0
@@ -209,13 +242,15 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
 
 
 @numba.njit(cache=True, nogil=True, inline='always')
-def _centroid(weight, axes, k, c0, c1, sa, sb):
-    """Weighted centroid of one window's ``weight`` within its ellipse about (c0, c1)."""
+def _centroid(weight, axes, k, c0, c1, s0, s1):
+    """Weighted centroid of one window's ``weight`` within the ellipse (s0, s1) about (c0, c1)."""
     size = weight.shape[0]
     ca, cb = _ellipse_origin(axes, k, c0, c1)
+    sa, sb = _inverse_squares(s0, s1)
+    x0, x1, y0, y1 = _span(axes, k, c0, c1, s0, s1, size)
     total, sx, sy = 0.0, 0.0, 0.0
-    for y in range(size):
-        for x in range(size):
+    for y in range(y0, y1):
+        for x in range(x0, x1):
             if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0:
                 wv = weight[y, x]
                 total += wv
@@ -290,13 +325,13 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
         # Dark things apart from the dot are not the dot's: its own dark
         # region (8-connected) is the one with the darkest pixel within a
         # pixel and a half of the centre (the first such, row by row).
-        best, best_value = 0, _F32(-1.0)
-        for y in range(size):
-            for x in range(size):
-                near = abs(x - c0) <= 1.5 and abs(y - c1) <= 1.5
-                value = weight[y, x] if near else _F32(0.0)
-                if value > best_value:
-                    best, best_value = y * size + x, value
+        # (Elsewhere the weight counts as 0: the first pixel when no pixel
+        # near the centre has any.)
+        best, best_value = 0, _F32(0.0)
+        for y in range(_start(c1 - 1.5, size), _stop(c1 + 1.5, size)):
+            for x in range(_start(c0 - 1.5, size), _stop(c0 + 1.5, size)):
+                if abs(x - c0) <= 1.5 and abs(y - c1) <= 1.5 and weight[y, x] > best_value:
+                    best, best_value = y * size + x, weight[y, x]
         for y in range(size):
             for x in range(size):
                 connected[k, y, x] = not dark[y, x]
@@ -306,30 +341,35 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
             for x in range(size):
                 if not connected[k, y, x]:
                     weight[y, x] = _F32(0.0)
-        sa, sb = _inverse_squares(tight[k, 0], tight[k, 1])
         for _ in range(2):
-            c0, c1 = _centroid(weight, axes, k, c0, c1, sa, sb)
+            c0, c1 = _centroid(weight, axes, k, c0, c1, tight[k, 0], tight[k, 1])
         out_c[k, 0], out_c[k, 1] = c0, c1
         ca, cb = _ellipse_origin(axes, k, c0, c1)
+        sa, sb = _inverse_squares(tight[k, 0], tight[k, 1])
         ga, gb = _inverse_squares(tight[k, 0] + 1.0, tight[k, 1] + 1.0)
         threshold = _F32(0.25) * top[k]
         n_stained, n_beyond = 0, 0
         for y in range(size):
             for x in range(size):
-                region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
                 if window[k, y, x] and mine[y, x] \
                         and _ellipse_at(axes, k, x, y, ca, cb, ga, gb) > 1.0:
                     n_beyond += 1
                     if weight[y, x] > threshold:
                         n_stained += 1
         stained[k], beyond[k] = n_stained, n_beyond
-        asymmetry[k] = _asymmetry(weight, region, c0, c1, sigma, rows)
+        region[:] = False
+        span = _span(axes, k, c0, c1, tight[k, 0], tight[k, 1], size)
+        for y in range(span[2], span[3]):
+            for x in range(span[0], span[1]):
+                region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
+        asymmetry[k] = _asymmetry(weight, region, span, c0, c1, sigma, rows)
         # The first weight over the inner part round the prediction.
         ia, ib = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
         sa, sb = _inverse_squares(inner[k, 0], inner[k, 1])
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], inner[k, 0], inner[k, 1], size)
         count, total, squares = 0, 0.0, 0.0
-        for y in range(size):
-            for x in range(size):
+        for y in range(y0, y1):
+            for x in range(x0, x1):
                 if mine[y, x] and _ellipse_at(axes, k, x, y, ia, ib, sa, sb) <= 1.0:
                     wv = first_weight[k, y, x]
                     count += 1
@@ -363,23 +403,25 @@ def _flood(dark, keep, start, stack):
 
 
 @numba.njit(cache=True, nogil=True)
-def _asymmetry(weight, region, c0, c1, sigma, rows):
+def _asymmetry(weight, region, span, c0, c1, sigma, rows):
     """
     How far ``weight`` is from point-symmetric about (c0, c1), less the noise.
 
     As :func:`point_reflection` (nearest for ``region``, bilinear for
-    ``weight``), over the pixels of ``region`` whose reflection is in it
-    too; ``rows`` is scratch (S, S) float32.
+    ``weight``), over the pixels of ``region`` (within ``span``, as from
+    :func:`_span`) whose reflection is in it too; ``rows`` is scratch (S,
+    S) float32.
     """
     size = weight.shape[0]
-    _reflect_rows(weight, c1, rows)
+    x0, x1, y0, y1 = span
+    _reflect_rows(weight, c1, rows, y0, y1)
     total, difference, count = 0.0, 0.0, 0
-    for y in range(size):
-        for x in range(size):
+    for y in range(y0, y1):
+        for x in range(x0, x1):
             if not region[y, x]:
                 continue
-            ny = int(np.floor(2.0 * c1 - y + 0.5))
-            nx = int(np.floor(2.0 * c0 - x + 0.5))
+            ny = _floor_index(2.0 * c1 - y + 0.5, size)
+            nx = _floor_index(2.0 * c0 - x + 0.5, size)
             if ny < 0 or ny >= size or nx < 0 or nx >= size or not region[ny, nx]:
                 continue
             own = weight[y, x]
@@ -395,14 +437,14 @@ def _asymmetry(weight, region, c0, c1, sigma, rows):
 
 
 @numba.njit(cache=True, nogil=True, inline='always')
-def _reflect_rows(a, c1, rows):
-    """Rows of (S, S) ``a`` reflected through row ``c1``, bilinear, into ``rows`` (0 beyond)."""
+def _reflect_rows(a, c1, rows, y0, y1):
+    """Rows ``y0 .. y1 - 1`` of (S, S) ``a`` reflected through row ``c1``, bilinear, into ``rows``."""
     size = a.shape[0]
-    for y in range(size):
+    for y in range(y0, y1):
         pos = 2.0 * c1 - y
         b = np.floor(pos)
         f = _F32(pos - b)
-        i = int(b) if abs(b) < 2 * size + 2 else -2
+        i = _floor_index(pos, size)
         for x in range(size):
             r0 = a[i, x] if 0 <= i < size else _F32(0.0)
             r1 = a[i + 1, x] if 0 <= i + 1 < size else _F32(0.0)
@@ -416,10 +458,16 @@ def _reflect_column(rows, y, x, c0):
     pos = 2.0 * c0 - x
     b = np.floor(pos)
     f = _F32(pos - b)
-    i = int(b) if abs(b) < 2 * size + 2 else -2
+    i = _floor_index(pos, size)
     r0 = rows[y, i] if 0 <= i < size else _F32(0.0)
     r1 = rows[y, i + 1] if 0 <= i + 1 < size else _F32(0.0)
     return (_F32(1.0) - f) * r0 + f * r1
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _floor_index(v, size):
+    """floor(v) as an index, or -2 (off the window either way) when far outside ``0 .. size``."""
+    return int(np.floor(v)) if -2.0 <= v <= size + 1.0 else -2
 
 
 @numba.njit(cache=True, nogil=True)
@@ -436,13 +484,13 @@ def point_reflection(a, c, nearest):
     for k in range(k_count):
         if nearest:
             for y in range(size):
-                ny = int(np.floor(2.0 * c[k, 1] - y + 0.5))
+                ny = _floor_index(2.0 * c[k, 1] - y + 0.5, size)
                 for x in range(size):
-                    nx = int(np.floor(2.0 * c[k, 0] - x + 0.5))
+                    nx = _floor_index(2.0 * c[k, 0] - x + 0.5, size)
                     if 0 <= ny < size and 0 <= nx < size:
                         out[k, y, x] = a[k, ny, nx]
         else:
-            _reflect_rows(a[k], c[k, 1], rows)
+            _reflect_rows(a[k], c[k, 1], rows, 0, size)
             for y in range(size):
                 for x in range(size):
                     out[k, y, x] = _reflect_column(rows, y, x, c[k, 0])
@@ -460,60 +508,54 @@ def colours(pixels, table, mask, core_mask, axes, at, grown):
     the mean and spread of the darkness, over ``core_mask`` within the
     ellipse ``grown`` round ``at``.
 
-    Returns the smoothed darkness (K, S, S, 3), each channel's centroid
-    (K, 3, 2, window coordinates) and weight (K, 3), the peak (K, 3; 0
-    where the core is empty) and the largest channel spread (K,) in the core.
+    Returns the darkness (K, S, S, 3), each channel's centroid (K, 3, 2,
+    window coordinates) and weight (K, 3), the peak (K, 3; 0 where the core
+    is empty) and the largest channel spread (K,) in the core.
     """
     k_count, size = pixels.shape[0], pixels.shape[1]
-    dark = np.empty((size, size, 3), dtype=np.float32)
-    smooth = np.empty((k_count, size, size, 3), dtype=np.float32)
+    dark = np.empty((k_count, size, size, 3), dtype=np.float32)
     centroid = np.empty((k_count, 3, 2))
     strength = np.empty((k_count, 3))
     peak = np.zeros((k_count, 3))
     spread = np.empty(k_count)
+    total = np.empty(3)
+    sx = np.empty(3)
+    sy = np.empty(3)
+    mean = np.empty(3)
+    squares = np.empty(3)
     for k in range(k_count):
-        total = np.zeros(3)
-        sx = np.zeros(3)
-        sy = np.zeros(3)
+        total[:] = 0.0
+        sx[:] = 0.0
+        sy[:] = 0.0
         for y in range(size):
             for x in range(size):
                 for ch in range(3):
-                    d = table[pixels[k, y, x, ch], ch]
-                    dark[y, x, ch] = d
-                    if mask[k, y, x]:
-                        wv = max(d - _F32(0.1), _F32(0.0))
-                        total[ch] += wv
-                        sx[ch] += wv * x
-                        sy[ch] += wv * y
+                    dark[k, y, x, ch] = table[pixels[k, y, x, ch], ch]
+                if not mask[k, y, x]:
+                    continue
+                for ch in range(3):
+                    wv = max(dark[k, y, x, ch] - _F32(0.1), _F32(0.0))
+                    total[ch] += wv
+                    sx[ch] += wv * x
+                    sy[ch] += wv * y
         for ch in range(3):
             t = max(total[ch], 1e-6)
             strength[k, ch] = t
             centroid[k, ch, 0], centroid[k, ch, 1] = sx[ch] / t, sy[ch] / t
-        # 3x3 mean with the window's edge pixels repeated (as OpenCV's
-        # blur with BORDER_REPLICATE on the window alone).
-        for y in range(size):
-            for x in range(size):
-                for ch in range(3):
-                    acc = 0.0
-                    for dy in range(-1, 2):
-                        yy = min(max(y + dy, 0), size - 1)
-                        for dx in range(-1, 2):
-                            xx = min(max(x + dx, 0), size - 1)
-                            acc += dark[yy, xx, ch]
-                    smooth[k, y, x, ch] = _F32(acc * (1.0 / 9.0))
         ca, cb = _ellipse_origin(axes, k, at[k, 0], at[k, 1])
         sa, sb = _inverse_squares(grown[k, 0], grown[k, 1])
+        x0, x1, y0, y1 = _span(axes, k, at[k, 0], at[k, 1], grown[k, 0], grown[k, 1], size)
         count = 0
-        mean = np.zeros(3)
-        squares = np.zeros(3)
-        for y in range(size):
-            for x in range(size):
+        mean[:] = 0.0
+        squares[:] = 0.0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
                 if not core_mask[k, y, x] or _ellipse_at(axes, k, x, y, ca, cb, sa, sb) > 1.0:
                     continue
                 count += 1
                 for ch in range(3):
-                    peak[k, ch] = max(peak[k, ch], smooth[k, y, x, ch])
-                    d = dark[y, x, ch]
+                    peak[k, ch] = max(peak[k, ch], _box3_at(dark[k, :, :, ch], x, y))
+                    d = dark[k, y, x, ch]
                     mean[ch] += d
                     squares[ch] += d * d
         count = max(count, 1)
@@ -522,4 +564,16 @@ def colours(pixels, table, mask, core_mask, axes, at, grown):
             m = mean[ch] / count
             widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
         spread[k] = widest
-    return smooth, centroid, strength, peak, spread
+    return dark, centroid, strength, peak, spread
+
+
+@numba.njit(cache=True, nogil=True)
+def box3(a):
+    """3x3 mean of each channel of one (S, S, C) float32 window, its edge pixels repeated."""
+    size, channels = a.shape[0], a.shape[2]
+    out = np.empty_like(a)
+    for ch in range(channels):
+        for y in range(size):
+            for x in range(size):
+                out[y, x, ch] = _box3_at(a[:, :, ch], x, y)
+    return out

@@ -235,7 +235,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     params = dot_image.params
     if core_margin is None:
         core_margin = params.max_channel_shift_px + 1.0
-    spots = np.asarray(spots)
+    spots = np.ascontiguousarray(spots, dtype=np.int64)
     plane_xy, radii = layout.points[spots], layout.radii[spots]
     n = len(spots)
     und = apply_h(H, plane_xy)
@@ -287,50 +287,29 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
                 paper: Paper, params: DetectorParams, core_margin: float,
                 out: SpotMeasures, refine: bool = True) -> None:
-    """Centroid in a generous window, and the tests of a dot, written into ``out``."""
+    """
+    Centroid in a generous window, and the tests of a dot, written into ``out``.
+
+    The darkness (below the local white, less a floor that keeps paper
+    noise out) in the spot's share of the window, on the card inside its
+    edge by two image pixels (blur carries what is beyond onto it) but
+    never closer than a pixel and a half round the spot itself (a steep
+    view brings the edge that close, and cutting the spot's own blur would
+    pull its centre). Its peak (3x3 mean) is taken where the spot should be:
+    a spot that is not there drifts off towards whatever is dark nearby.
+    """
     idx, s = g.index, g.scale
     level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.float32(paper.sigma / s)
     quiet = sigma if paper.quiet is None else min(sigma, np.float32(paper.quiet / s))
-    # Darkness below the local white, less a floor that keeps paper noise out.
-    floor = np.maximum(0.04 * level, 2.0 * quiet)
-    # On the card, inside its edge by two image pixels (blur carries what is
-    # beyond onto it)...
-    room = (layout.half - 2.0 * np.hypot(Linv[idx, :, 0], Linv[idx, :, 1])).astype(np.float32)
-    # ...but never closer than a pixel and a half round the spot itself: a
-    # steep view brings the edge that close, and cutting the spot's own blur
-    # would pull its centre.
-    own = np.column_stack([major[idx], minor[idx]]) / s + 1.5
-    semi = g.semi
-    # Peak darkness (3x3 mean) where the spot should be: a spot that is not
-    # there drifts off towards whatever is dark nearby.
-    core = np.minimum((major[idx] / s + core_margin / s) ** 2 / semi[:, 0] ** 2, 1.0)
-    # The centroid (twice, the window re-centred) of the darkness in the
-    # window, shared with the neighbours as the card's plane is.
-    (g.pixels, g.in_image, raw, g.weight, g.cell, g.window, g.on_card, c, top, rim_mean, mass,
-     whole, spread) = spot_kernels.first_pass(
-        g.source, g.base, g.size, g.axes, g.pred, semi, own, core, g.to_plane,
-        layout.points[spots[idx]], spots[idx].astype(np.int64), layout.owner, layout.half,
-        layout.resolution, level, floor.astype(np.float32), room)
-    equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
-    expected = np.pi * major[idx] * minor[idx]
-    relative = top / np.maximum(level, 1.0)
-    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * quiet)
-    isolated = rim_mean <= 0.3 * top
-    sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
-    # A window beyond the border: a spot cut by it has a false centre.
-    out.inside[idx] = whole
-    out.points[idx] = g.to_image(c)
-    out.valid[idx] = whole & dark_enough & isolated & sized
-    out.peak[idx] = relative
-    out.area[idx] = equivalent
-    g.c, g.top, g.sigma = c, top, sigma
-    if not refine:
-        return
-    # Spread of each spot's darkness (image pixels^2), for the blur.
-    g.spread = spread / np.maximum(mass, 1e-6)[:, None] * (s * s)
-    g.raw = raw
+    (g.pixels, g.in_image, g.raw, g.weight, g.cell, g.window, g.on_card, g.c, g.top,
+     g.spread) = spot_kernels.first_pass(
+        g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
+        layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
+        level, quiet, core_margin, params.min_window_darkness, out.points, out.valid, out.peak,
+        out.area, out.inside)
+    g.sigma = sigma
 
 
 def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,

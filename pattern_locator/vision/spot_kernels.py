@@ -122,29 +122,30 @@ def _owned(owner, spot, qx, qy, half, resolution):
 
 
 @numba.njit(cache=True, nogil=True)
-def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, anchor_xy,
-               spot, owner, half, resolution, level, floor, room):
+def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
+               owner, half, resolution, major, minor, linv, level, quiet, core_margin,
+               min_darkness, points, valid, peak, area, inside):
     """
-    Gather each window's pixels and take the first, generous centroid.
+    Gather each window's pixels, take the first, generous centroid and test the dots.
 
-    ``source`` (h, w, C) uint8, the image or the decimated image (C = 3, or
-    1 for grey); window ``k`` covers its pixels ``base[k] .. base[k] + size
-    - 1`` (x, y), clipped to the image (``in_image`` tells which are in it).
-    Per window: ``pred`` the predicted centre, ``semi`` the window's
-    semi-axes and ``own_semi`` the spot's own (grown for blur) along
-    ``axes``; ``core`` the squared part of the window where the peak is
-    looked for; ``to_plane`` (metres per pixel) and ``anchor_xy`` (the
-    spot's place on the card, at ``pred``); ``spot`` its index in the
-    layout's ``owner`` raster (``half``, ``resolution``: the raster's
-    geometry); ``level`` the local white and ``floor`` the darkness floor;
-    ``room`` how far (card metres, x and y) from the card's centre a pixel
-    is on the card.
+    ``source`` (h, w, C) uint8 is the image or the image decimated by
+    ``scale`` (C = 3, or 1 for grey); window ``k`` covers its pixels
+    ``base[k] .. base[k] + size - 1`` (x, y), clipped to the image. Window
+    ``k`` is spot ``index[k]``: ``pred`` its predicted centre (window
+    coordinates), ``semi`` the window's semi-axes along ``axes``,
+    ``to_plane`` metres per source pixel; ``spots``, ``plane_xy``,
+    ``major``, ``minor`` (image pixels) and ``linv`` (metres per image
+    pixel) are per spot, ``spots`` indexing the layout's ``owner`` raster
+    (``half``, ``resolution``: its geometry). ``level`` is each window's
+    local white, ``quiet`` the source's noise.
 
-    Returns pixels, in_image, raw (darkness below the floor, 0 off the
-    image), weight (raw in the spot's cell), cell, window, on_card (on the
-    card or within the spot's own ellipse), centres (K, 2), top (peak 3x3
-    mean darkness round the prediction), rim_mean, mass, whole (window
-    inside the image) and spread (K, 3: xx, xy, yy second moments).
+    Writes the centre (image pixels), the tests, the peak darkness and the
+    area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
+    ``index``; returns pixels, in_image, raw (darkness below the floor, 0
+    off the image), weight (raw in the spot's cell), cell, window, on_card
+    (on the card or within the spot's own ellipse), centres (K, 2, window
+    coordinates), top (the peak 3x3 mean darkness round the prediction)
+    and spread (K, 3: xx, xy, yy second moments, image pixels^2).
     """
     k_count = base.shape[0]
     h, w, channels = source.shape
@@ -154,22 +155,28 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
     raw = np.empty(shape, dtype=np.float32)
     weight = np.empty(shape, dtype=np.float32)
     cell = np.empty(shape, dtype=np.bool_)
-    window = np.empty(shape, dtype=np.bool_)
+    window = np.zeros(shape, dtype=np.bool_)
     on_card = np.empty(shape, dtype=np.bool_)
     centres = np.empty((k_count, 2))
     top = np.zeros(k_count, dtype=np.float32)
-    rim_mean = np.empty(k_count)
-    mass = np.empty(k_count)
-    whole = np.empty(k_count, dtype=np.bool_)
     spread = np.empty((k_count, 3))
     half32, resolution32 = _F32(half), _F32(resolution)
+    off = (scale - 1) / 2.0
     for k in range(k_count):
+        i = index[k]
         bx, by = base[k, 0], base[k, 1]
-        clear = level[k] - floor[k]
+        # Darkness below the local white, less a floor that keeps paper
+        # noise out.
+        floor = max(_F32(0.04) * level[k], _F32(2.0) * quiet)
+        clear = level[k] - floor
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
-        qx0, qy0 = _F32(anchor_xy[k, 0]), _F32(anchor_xy[k, 1])
+        qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
+        # On the card, inside its edge by two image pixels...
+        room_x = _F32(half - 2.0 * np.hypot(linv[i, 0, 0], linv[i, 0, 1]))
+        room_y = _F32(half - 2.0 * np.hypot(linv[i, 1, 0], linv[i, 1, 1]))
+        # ...or within the spot's own ellipse grown by a pixel and a half.
         ca, cb = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
-        oa, ob = _inverse_squares(own_semi[k, 0], own_semi[k, 1])
+        oa, ob = _inverse_squares(major[i] / scale + 1.5, minor[i] / scale + 1.5)
         for y in range(size):
             v = by + y
             vc = min(max(v, 0), h - 1)
@@ -181,40 +188,38 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
                     p = source[vc, uc, ch]
                     pixels[k, y, x, ch] = p
                     darkest = min(darkest, p)
-                inside = u >= 0 and u < w and v >= 0 and v < h
-                in_image[k, y, x] = inside
+                seen = u >= 0 and u < w and v >= 0 and v < h
+                in_image[k, y, x] = seen
                 r = max(clear - _F32(darkest), _F32(0.0))
-                raw[k, y, x] = r if inside else _F32(0.0)
+                raw[k, y, x] = r if seen else _F32(0.0)
                 qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
-                mine = _owned(owner, spot[k], qx, qy, half32, resolution32)
-                # On the card inside its edge, or within the spot's own
-                # ellipse grown for blur (see centres._first_pass).
-                card = (abs(qx) < room[k, 0] and abs(qy) < room[k, 1]) \
+                mine = _owned(owner, spots[i], qx, qy, half32, resolution32)
+                card = (abs(qx) < room_x and abs(qy) < room_y) \
                     or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0
                 on_card[k, y, x] = card
-                cell[k, y, x] = inside and mine and card
-                weight[k, y, x] = r if inside and mine and card else _F32(0.0)
+                cell[k, y, x] = seen and mine and card
+                weight[k, y, x] = r if seen and mine and card else _F32(0.0)
         # The centroid twice, in the window round the latest centre.
         c0, c1 = pred[k, 0], pred[k, 1]
         for _ in range(2):
             c0, c1 = _centroid(weight[k], axes, k, c0, c1, semi[k, 0], semi[k, 1])
         centres[k, 0], centres[k, 1] = c0, c1
         # Peak: the largest 3x3 mean within the core round the prediction.
+        reach = major[i] / scale + core_margin / scale
+        core = min(reach * reach / (semi[k, 0] * semi[k, 0]), 1.0)
         sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
-        reach = np.sqrt(core[k])
-        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], reach * semi[k, 0],
-                               reach * semi[k, 1], size)
-        peak = _F32(0.0)
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], np.sqrt(core) * semi[k, 0],
+                               np.sqrt(core) * semi[k, 1], size)
+        best = _F32(0.0)
         for y in range(y0, y1):
             for x in range(x0, x1):
-                if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= core[k]:
-                    peak = max(peak, _box3_at(weight[k], x, y))
-        top[k] = peak
-        rim_sum, rim_count, total, out = 0.0, 0, 0.0, False
+                if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= core:
+                    best = max(best, _box3_at(weight[k], x, y))
+        top[k] = best
+        rim_sum, rim_count, mass, out = 0.0, 0, 0.0, False
         sxx, sxy, syy = 0.0, 0.0, 0.0
         fc0, fc1 = _F32(c0), _F32(c1)
         ea, eb = _ellipse_origin(axes, k, c0, c1)
-        window[k] = False
         x0, x1, y0, y1 = _span(axes, k, c0, c1, semi[k, 0], semi[k, 1], size)
         for y in range(y0, y1):
             for x in range(x0, x1):
@@ -224,7 +229,7 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
                 window[k, y, x] = True
                 out = out or not in_image[k, y, x]
                 wd = weight[k, y, x]
-                total += wd
+                mass += wd
                 if e > _F32(0.6) and cell[k, y, x]:
                     rim_sum += wd
                     rim_count += 1
@@ -233,12 +238,25 @@ def first_pass(source, base, size, axes, pred, semi, own_semi, core, to_plane, a
                 sxx += wd * dx * dx
                 sxy += wd * dx * dy
                 syy += wd * dy * dy
-        rim_mean[k] = rim_sum / max(rim_count, 1)
-        mass[k] = total
-        whole[k] = not out
-        spread[k, 0], spread[k, 1], spread[k, 2] = sxx, sxy, syy
-    return (pixels, in_image, raw, weight, cell, window, on_card, centres, top, rim_mean, mass,
-            whole, spread)
+        # The tests of a dot: dark enough against the paper and its noise,
+        # its darkness inside the window (paper round it), not much bigger
+        # than a dot, and the window inside the image (a spot cut by the
+        # border has a false centre).
+        equivalent = mass / max(np.float64(best), np.float64(_F32(1e-6))) * scale * scale
+        relative = best / max(level[k], _F32(1.0))
+        dark_enough = relative >= _F32(min_darkness) and best >= _F32(4.0) * quiet
+        isolated = rim_sum / max(rim_count, 1) <= _F32(0.3) * best
+        sized = equivalent <= 3.0 * (np.pi * major[i] * minor[i]) + 8.0 * (major[i] + 1.0)
+        inside[i] = not out
+        valid[i] = not out and dark_enough and isolated and sized
+        points[i, 0], points[i, 1] = (c0 + bx) * scale + off, (c1 + by) * scale + off
+        peak[i] = relative
+        area[i] = equivalent
+        total = max(mass, 1e-6)
+        spread[k, 0] = sxx / total * (scale * scale)
+        spread[k, 1] = sxy / total * (scale * scale)
+        spread[k, 2] = syy / total * (scale * scale)
+    return pixels, in_image, raw, weight, cell, window, on_card, centres, top, spread
 
 
 @numba.njit(cache=True, nogil=True, inline='always')

@@ -357,39 +357,13 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     spot, so that sharing pixels with a close neighbour cuts both sides
     alike: |w - reflected w| / (w + reflected w) summed, less what the pixel
     noise alone gives (|difference of two noisy pixels| is 1.13 sigma on
-    average).
+    average). A dot must also stay near its prediction, and its dark region
+    must not reach beyond the dot and its blur (an object touching it).
     """
-    idx, s = g.index, g.scale
-    axes = g.axes.astype(np.float64)
-    # The blur's extent (2.5 sigma) along each dot's axes, plus a pixel.
-    ext = np.sqrt(np.einsum('kia,ij,kja->ka', axes, blur, axes))
-    tight = (np.column_stack([major[idx], minor[idx]]) + 2.5 * ext + 1.0) / s
-    # The inner part of the dot (ink is even there), round the prediction.
-    inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / s
-    c, g.connected, asymmetry, stained, beyond, mean, spread = spot_kernels.last_pass(
-        g.raw, g.on_card, g.weight, g.window, g.top, g.c, g.pred, g.axes, tight, inner, g.sigma,
-        g.to_plane, layout.points[spots[idx]], spots[idx].astype(np.int64), layout.owner,
-        layout.half, layout.resolution)
-    out.points[idx] = g.to_image(c)
-    steady = np.hypot(*(out.points[idx] - pred[idx]).T) <= np.maximum(1.5, 0.3 * major[idx] + 1.0)
-    # Reflecting a dot a pixel or two thick by interpolation blurs it: more
-    # room for thin dots.
-    grid = 0.15 / np.maximum(minor[idx] / s, 0.5)
-    # An object touching the dot joins its dark region beyond the dot and
-    # its blur.
-    touched = stained > 0.1 * beyond + 1
-    exists = out.valid[idx].copy()
-    out.valid[idx] &= steady & (asymmetry <= 0.08 + grid) & ~touched
-    # Its colour may still be read where the geometry may not: a dot touched
-    # by an object, or with an object over part of its rim, has a clean
-    # inner part (ink is even there). Too small a dot to tell: not read.
-    # Evenness against the dots that passed everything (same blur, same size).
-    relative = spread / np.maximum(mean, 1e-6)
-    typical = median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
-        else 0.0
-    even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
-    out.readable[idx] = out.valid[idx] | (exists & steady & even)
-    g.c = c
+    g.c, g.connected = spot_kernels.last_pass(
+        g.raw, g.on_card, g.weight, g.window, g.top, g.c, g.pred, g.axes, g.base, g.scale,
+        g.index, major, minor, blur, g.sigma, g.to_plane, spots, layout.points[spots],
+        layout.owner, layout.half, layout.resolution, out.points, pred, out.valid, out.readable)
 
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,

@@ -294,32 +294,30 @@ def _box3_at(a, x, y):
 
 
 @numba.njit(cache=True, nogil=True)
-def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tight, inner, sigma,
-              to_plane, anchor_xy, spot, owner, half, resolution):
+def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base, scale, index,
+              major, minor, blur, sigma, to_plane, spots, plane_xy, owner, half, resolution,
+              points, predicted, valid, readable):
     """
     Centroid again in a tight window, the dark region joined to the dot alone; the dot tests.
 
     ``raw``, ``on_card``, ``first_weight``, ``window``, ``top`` and
-    ``centres`` are :func:`first_pass`'s; the windows are shared about
-    ``centres`` now (``to_plane``, ``anchor_xy``, ``spot``, ``owner``,
-    ``half``, ``resolution`` as there). ``tight`` (K, 2): the semi-axes of
-    the dot and its blur; ``inner`` those of its inner part (round
-    ``pred``); ``sigma`` the pixel noise.
+    ``centres`` are :func:`first_pass`'s (and its other arguments as
+    there); the windows are shared about ``centres`` now. The tight window
+    is the dot and its ``blur`` (2.5 sigma, covariance in image pixels^2)
+    plus a pixel; ``sigma`` the source's pixel noise.
 
-    Returns the centres (K, 2), the connected mask (K, S, S), asymmetry
-    (K,), the count of dark pixels ``stained`` beyond the dot and its blur
-    and of all pixels there (``beyond``), and the mean and spread of the
-    first weight over the inner part.
+    Writes each centre (image pixels) into ``points`` and the tests into
+    ``valid`` and ``readable`` (``predicted``: where the homography put
+    the spots); returns the centres (K, 2, window coordinates) and the
+    mask (K, S, S) of the pixels not in a dark region apart from the dot's.
     """
     k_count, size = raw.shape[0], raw.shape[1]
     shape = (k_count, size, size)
     connected = np.empty(shape, dtype=np.bool_)
     out_c = np.empty((k_count, 2))
-    asymmetry = np.empty(k_count)
-    stained = np.empty(k_count, dtype=np.int64)
-    beyond = np.empty(k_count, dtype=np.int64)
-    core_mean = np.empty(k_count)
-    core_spread = np.empty(k_count)
+    steady = np.empty(k_count, dtype=np.bool_)
+    exists = np.empty(k_count, dtype=np.bool_)
+    relative = np.empty(k_count)
     half32, resolution32 = _F32(half), _F32(resolution)
     mine = np.empty((size, size), dtype=np.bool_)
     weight = np.empty((size, size), dtype=np.float32)
@@ -327,15 +325,25 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
     region = np.empty((size, size), dtype=np.bool_)
     stack = np.empty(size * size, dtype=np.int64)
     rows = np.empty((size, size), dtype=np.float32)
+    tight = np.empty(2)
+    off = (scale - 1) / 2.0
     for k in range(k_count):
+        i = index[k]
+        # The blur's extent (2.5 sigma) along each of the dot's axes.
+        for axis in range(2):
+            ext = 0.0
+            for r in range(2):
+                for q in range(2):
+                    ext += np.float64(axes[k, r, axis]) * blur[r, q] * np.float64(axes[k, q, axis])
+            tight[axis] = ((major[i] if axis == 0 else minor[i]) + 2.5 * np.sqrt(ext) + 1.0) / scale
         c0, c1 = centres[k, 0], centres[k, 1]
         ax0, ay0 = _F32(c0), _F32(c1)
-        qx0, qy0 = _F32(anchor_xy[k, 0]), _F32(anchor_xy[k, 1])
+        qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
         threshold = _F32(0.25) * max(top[k], _F32(1e-6))
         for y in range(size):
             for x in range(size):
                 qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
-                m = _owned(owner, spot[k], qx, qy, half32, resolution32)
+                m = _owned(owner, spots[i], qx, qy, half32, resolution32)
                 mine[y, x] = m
                 wv = raw[k, y, x] if m and on_card[k, y, x] else _F32(0.0)
                 weight[y, x] = wv
@@ -360,11 +368,11 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
                 if not connected[k, y, x]:
                     weight[y, x] = _F32(0.0)
         for _ in range(2):
-            c0, c1 = _centroid(weight, axes, k, c0, c1, tight[k, 0], tight[k, 1])
+            c0, c1 = _centroid(weight, axes, k, c0, c1, tight[0], tight[1])
         out_c[k, 0], out_c[k, 1] = c0, c1
         ca, cb = _ellipse_origin(axes, k, c0, c1)
-        sa, sb = _inverse_squares(tight[k, 0], tight[k, 1])
-        ga, gb = _inverse_squares(tight[k, 0] + 1.0, tight[k, 1] + 1.0)
+        sa, sb = _inverse_squares(tight[0], tight[1])
+        ga, gb = _inverse_squares(tight[0] + 1.0, tight[1] + 1.0)
         threshold = _F32(0.25) * top[k]
         n_stained, n_beyond = 0, 0
         for y in range(size):
@@ -374,17 +382,29 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
                     n_beyond += 1
                     if weight[y, x] > threshold:
                         n_stained += 1
-        stained[k], beyond[k] = n_stained, n_beyond
         region[:] = False
-        span = _span(axes, k, c0, c1, tight[k, 0], tight[k, 1], size)
+        span = _span(axes, k, c0, c1, tight[0], tight[1], size)
         for y in range(span[2], span[3]):
             for x in range(span[0], span[1]):
                 region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
-        asymmetry[k] = _asymmetry(weight, region, span, c0, c1, sigma, rows)
-        # The first weight over the inner part round the prediction.
+        asymmetry = _asymmetry(weight, region, span, c0, c1, sigma, rows)
+        points[i, 0], points[i, 1] = (c0 + base[k, 0]) * scale + off, (c1 + base[k, 1]) * scale + off
+        steady[k] = np.hypot(points[i, 0] - predicted[i, 0], points[i, 1] - predicted[i, 1]) \
+            <= max(1.5, 0.3 * major[i] + 1.0)
+        # Reflecting a dot a pixel or two thick by interpolation blurs it:
+        # more room for thin dots. An object touching the dot joins its dark
+        # region beyond the dot and its blur.
+        grid = 0.15 / max(minor[i] / scale, 0.5)
+        touched = n_stained > 0.1 * n_beyond + 1
+        exists[k] = valid[i]
+        valid[i] = valid[i] and steady[k] and asymmetry <= 0.08 + grid and not touched
+        # The evenness of the first weight over the inner part round the
+        # prediction (ink is even there).
+        inner0 = (0.6 * major[i] + 0.7) / scale
+        inner1 = (0.6 * minor[i] + 0.7) / scale
         ia, ib = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
-        sa, sb = _inverse_squares(inner[k, 0], inner[k, 1])
-        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], inner[k, 0], inner[k, 1], size)
+        sa, sb = _inverse_squares(inner0, inner1)
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], inner0, inner1, size)
         count, total, squares = 0, 0.0, 0.0
         for y in range(y0, y1):
             for x in range(x0, x1):
@@ -395,9 +415,37 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, tigh
                     squares += wv * wv
         count = max(count, 1)
         mean = total / count
-        core_mean[k] = mean
-        core_spread[k] = np.sqrt(max(squares / count - mean * mean, 0.0))
-    return out_c, connected, asymmetry, stained, beyond, core_mean, core_spread
+        relative[k] = np.sqrt(max(squares / count - mean * mean, 0.0)) / max(mean, 1e-6)
+    # Its colour may still be read where the geometry may not (a dot
+    # touched by an object, or with one over part of its rim): when its
+    # inner part is as even as the dots' that passed everything (same blur,
+    # same size). Too small a dot to tell: not read.
+    typical = _median_where(relative, valid, index, 3)
+    for k in range(k_count):
+        i = index[k]
+        even = relative[k] <= 1.3 * typical + 0.03 and minor[i] >= 2.5
+        readable[i] = valid[i] or (exists[k] and steady[k] and even)
+    return out_c, connected
+
+
+@numba.njit(cache=True, nogil=True)
+def _median_where(values, chosen, index, least):
+    """
+    Median of ``values[k]`` where ``chosen[index[k]]``; 0 when fewer than ``least`` are.
+
+    As :func:`~.stats.median` (the middle value, or the mean of the two).
+    """
+    picked = np.empty(len(values))
+    n = 0
+    for k in range(len(values)):
+        if chosen[index[k]]:
+            picked[n] = values[k]
+            n += 1
+    if n < least or n == 0:
+        return 0.0
+    ordered = np.sort(picked[:n])
+    m = n // 2
+    return ordered[m] if n % 2 else (ordered[m - 1] + ordered[m]) / 2
 
 
 @numba.njit(cache=True, nogil=True)

@@ -320,19 +320,12 @@ def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.nd
     A sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along
     its axes; blur adds its own covariance to every dot alike (defocus in
     all directions, motion along one). The median over the dots resists a
-    few spoilt by neighbours or objects.
+    few spoilt by neighbours or objects. Its eigenvalues are at least 0.1.
     """
     spread = np.full((len(valid), 3), np.nan)
     for g in groups:
         spread[g.index] = g.spread
-    c, s = U[:, 0, 0], U[:, 1, 0]                       # major axis direction
-    a2, b2 = major ** 2 / 4, minor ** 2 / 4
-    sharp = np.column_stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c])
-    if np.count_nonzero(valid) < 3:
-        return 0.25 * np.eye(2)
-    xx, xy, yy = median(spread[valid] - sharp[valid], axis=0)
-    evals, evecs = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
-    return evecs @ np.diag(np.clip(evals, 0.1, None)) @ evecs.T
+    return spot_kernels.blur(spread, U, major, minor, valid)
 
 
 def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.ndarray,
@@ -376,7 +369,9 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     grown by the largest channel shift: a channel displaced by a pixel or
     two has its peak displaced, not lowered. The window is shared with the
     neighbours as the card's plane is, and dark things not joined to the dot
-    are left out, so no neighbour's or object's colour comes in.
+    are left out, so no neighbour's or object's colour comes in. A dot read
+    for its colour alone (not valid) must be even in every channel there,
+    as the sure dots are: not half ink, half something else.
     """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
     table = np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma,
@@ -385,26 +380,10 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     channel_at = np.full((n, 3, 2), np.nan)
     strength = np.zeros((n, 3))
     for g in groups:
-        idx = g.index
-        # Where each channel's image of the dot is: the centroid of its
-        # darkness (above 0.1) in the window. The dot's inner part grown by
-        # the shift, clear of anything beside the dot; for a dot touched by
-        # something, not grown (and around where it should be).
-        sure = out.valid[idx][:, None]
-        inner = 0.6 * np.column_stack([major[idx], minor[idx]]) + 0.7
-        grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
-        at = np.where(sure, g.c, g.pred)
-        linked = g.cell & g.connected
-        dark, centroid, strength[idx], out.colour[idx], spread = spot_kernels.colours(
-            g.pixels, table, linked & g.window, linked, g.axes, at, grown)
-        channel_at[idx] = (centroid + g.base[:, None, :]) * g.scale + g.off
-        # A dot read for its colour alone must be even in every channel
-        # there, as the sure dots are: not half ink, half something else.
-        doubtful = out.readable[idx] & ~out.valid[idx]
-        if np.any(doubtful):
-            typical = median(spread[out.valid[idx]]) if np.count_nonzero(
-                out.valid[idx]) >= 3 else 0.0
-            out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
+        dark = spot_kernels.colours(
+            g.pixels, table, g.cell, g.window, g.connected, g.axes, g.c, g.pred, g.base,
+            g.scale, g.index, major, minor, params.max_channel_shift_px, out.valid, out.readable,
+            out.colour, channel_at, strength)
         _uncovered_part(g, dark, major, minor, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
 
@@ -474,14 +453,4 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
     against green, the median over the dots dark in both) tell each dot's
     offset, which is taken away.
     """
-    dark = strength >= 0.6 * strength.max(axis=1, keepdims=True)        # (N, 3)
-    shift = np.zeros((3, 2))
-    for c in (0, 2):
-        both = out.valid & dark[:, c] & dark[:, 1]
-        if np.count_nonzero(both) >= 3:
-            shift[c] = np.clip(median(channel_at[both, c] - channel_at[both, 1], axis=0),
-                               -limit, limit)
-    if not np.any(shift):
-        return
-    bias = (dark[:, :, None] * shift[None]).sum(axis=1) / np.maximum(dark.sum(axis=1), 1)[:, None]
-    out.points[:] = out.points - bias
+    spot_kernels.undo_channel_shift(channel_at, strength, limit, out.valid, out.points)

@@ -564,32 +564,36 @@ def point_reflection(a, c, nearest):
 
 
 @numba.njit(cache=True, nogil=True)
-def colours(pixels, table, mask, core_mask, axes, at, grown):
+def colours(pixels, table, cell, window, connected, axes, centres, pred, base, scale, index,
+            major, minor, max_shift, valid, readable, colour, channel_at, strength):
     """
     Per-channel darkness of each window's dot: where each channel's image is, and its peak.
 
     ``pixels`` (K, S, S, 3) uint8 and ``table`` (256, 3) float32, each
-    level's darkness per channel. The channels' centroids are taken over
-    ``mask`` (darkness above 0.1); the peak of the 3x3 mean darkness, and
-    the mean and spread of the darkness, over ``core_mask`` within the
-    ellipse ``grown`` round ``at``.
+    level's darkness per channel; ``cell``, ``window`` and ``connected``
+    the windows' masks; the other arguments as :func:`last_pass`'s. Each
+    channel's centroid is taken over its darkness above 0.1 in the window;
+    the peak of the 3x3 mean darkness within the dot's inner part grown by
+    the largest channel shift ``max_shift`` round its centre (for a dot
+    not ``valid``: not grown, round its prediction), in its cell and not
+    apart from it. A dot ``readable`` but not valid stays readable only if
+    its darkness there is as even as the valid dots'.
 
-    Returns the darkness (K, S, S, 3), each channel's centroid (K, 3, 2,
-    window coordinates) and weight (K, 3), the peak (K, 3; 0 where the core
-    is empty) and the largest channel spread (K,) in the core.
+    Writes ``colour`` (the peaks), ``channel_at`` (each channel's centroid,
+    image pixels) and ``strength`` (its darkness's sum) at ``index``, and
+    updates ``readable``; returns the darkness (K, S, S, 3).
     """
     k_count, size = pixels.shape[0], pixels.shape[1]
     dark = np.empty((k_count, size, size, 3), dtype=np.float32)
-    centroid = np.empty((k_count, 3, 2))
-    strength = np.empty((k_count, 3))
-    peak = np.zeros((k_count, 3))
     spread = np.empty(k_count)
     total = np.empty(3)
     sx = np.empty(3)
     sy = np.empty(3)
     mean = np.empty(3)
     squares = np.empty(3)
+    off = (scale - 1) / 2.0
     for k in range(k_count):
+        i = index[k]
         total[:] = 0.0
         sx[:] = 0.0
         sy[:] = 0.0
@@ -597,7 +601,7 @@ def colours(pixels, table, mask, core_mask, axes, at, grown):
             for x in range(size):
                 for ch in range(3):
                     dark[k, y, x, ch] = table[pixels[k, y, x, ch], ch]
-                if not mask[k, y, x]:
+                if not (cell[k, y, x] and window[k, y, x] and connected[k, y, x]):
                     continue
                 for ch in range(3):
                     wv = max(dark[k, y, x, ch] - _F32(0.1), _F32(0.0))
@@ -606,21 +610,31 @@ def colours(pixels, table, mask, core_mask, axes, at, grown):
                     sy[ch] += wv * y
         for ch in range(3):
             t = max(total[ch], 1e-6)
-            strength[k, ch] = t
-            centroid[k, ch, 0], centroid[k, ch, 1] = sx[ch] / t, sy[ch] / t
-        ca, cb = _ellipse_origin(axes, k, at[k, 0], at[k, 1])
-        sa, sb = _inverse_squares(grown[k, 0], grown[k, 1])
-        x0, x1, y0, y1 = _span(axes, k, at[k, 0], at[k, 1], grown[k, 0], grown[k, 1], size)
+            strength[i, ch] = t
+            channel_at[i, ch, 0] = (sx[ch] / t + base[k, 0]) * scale + off
+            channel_at[i, ch, 1] = (sy[ch] / t + base[k, 1]) * scale + off
+        sure = valid[i]
+        grow = max_shift if sure else 0.0
+        g0 = (0.6 * major[i] + 0.7 + grow) / scale
+        g1 = (0.6 * minor[i] + 0.7 + grow) / scale
+        a0 = centres[k, 0] if sure else pred[k, 0]
+        a1 = centres[k, 1] if sure else pred[k, 1]
+        ca, cb = _ellipse_origin(axes, k, a0, a1)
+        sa, sb = _inverse_squares(g0, g1)
+        x0, x1, y0, y1 = _span(axes, k, a0, a1, g0, g1, size)
         count = 0
         mean[:] = 0.0
         squares[:] = 0.0
+        for ch in range(3):
+            colour[i, ch] = 0.0
         for y in range(y0, y1):
             for x in range(x0, x1):
-                if not core_mask[k, y, x] or _ellipse_at(axes, k, x, y, ca, cb, sa, sb) > 1.0:
+                if not (cell[k, y, x] and connected[k, y, x]) \
+                        or _ellipse_at(axes, k, x, y, ca, cb, sa, sb) > 1.0:
                     continue
                 count += 1
                 for ch in range(3):
-                    peak[k, ch] = max(peak[k, ch], _box3_at(dark[k, :, :, ch], x, y))
+                    colour[i, ch] = max(colour[i, ch], _box3_at(dark[k, :, :, ch], x, y))
                     d = dark[k, y, x, ch]
                     mean[ch] += d
                     squares[ch] += d * d
@@ -630,7 +644,100 @@ def colours(pixels, table, mask, core_mask, axes, at, grown):
             m = mean[ch] / count
             widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
         spread[k] = widest
-    return dark, centroid, strength, peak, spread
+    # A dot read for its colour alone must be even in every channel there,
+    # as the sure dots are: not half ink, half something else.
+    typical = _median_where(spread, valid, index, 3)
+    for k in range(k_count):
+        i = index[k]
+        if readable[i] and not valid[i]:
+            readable[i] = spread[k] <= 1.3 * typical + 0.02
+    return dark
+
+
+@numba.njit(cache=True, nogil=True)
+def undo_channel_shift(channel_at, strength, limit, valid, points):
+    """
+    Move each point by its ink's channel shift (see :func:`~.centres._undo_channel_shift`).
+
+    ``channel_at`` (N, 3, 2): each channel's centroid; ``strength`` (N, 3)
+    its darkness. A channel is dark in a dot at 0.6 of its darkest
+    channel's strength. The card's shifts of red and blue against green
+    are the medians (clipped to ``limit``) over the ``valid`` dots dark in
+    both; each point moves by the mean shift of its dark channels.
+    """
+    n = strength.shape[0]
+    dark = np.empty((n, 3), dtype=np.bool_)
+    for i in range(n):
+        most = max(strength[i, 0], strength[i, 1], strength[i, 2])
+        for ch in range(3):
+            dark[i, ch] = strength[i, ch] >= 0.6 * most
+    shift = np.zeros((3, 2))
+    moved = False
+    offsets = np.empty(n)
+    everyone = np.arange(n)
+    for ch in (0, 2):
+        both = np.empty(n, dtype=np.bool_)
+        for i in range(n):
+            both[i] = valid[i] and dark[i, ch] and dark[i, 1]
+        for axis in range(2):
+            for i in range(n):
+                offsets[i] = channel_at[i, ch, axis] - channel_at[i, 1, axis]
+            median = _median_where(offsets, both, everyone, 3)
+            shift[ch, axis] = min(max(median, -limit), limit)
+            moved = moved or shift[ch, axis] != 0.0
+    if not moved:
+        return
+    for i in range(n):
+        count = max(int(dark[i, 0]) + int(dark[i, 1]) + int(dark[i, 2]), 1)
+        for axis in range(2):
+            bias = 0.0
+            for ch in range(3):
+                bias += shift[ch, axis] if dark[i, ch] else 0.0
+            points[i, axis] = points[i, axis] - bias / count
+
+
+@numba.njit(cache=True, nogil=True)
+def blur(spread, axes, major, minor, valid):
+    """
+    The image's blur (2x2 covariance, image pixels^2) from the dots' second moments.
+
+    See :func:`~.centres._blur`: the median over the ``valid`` dots of each
+    dot's ``spread`` (xx, xy, yy) less its sharp ellipse's (semi-axes
+    ``major``, ``minor`` halved, along ``axes``), its eigenvalues at least
+    0.1; 0.25 in all directions from fewer than three dots.
+    """
+    n = spread.shape[0]
+    if np.count_nonzero(valid) < 3:
+        return 0.25 * np.eye(2)
+    excess = np.empty((3, n))
+    for i in range(n):
+        c, s = axes[i, 0, 0], axes[i, 1, 0]                 # major axis direction
+        a2, b2 = major[i] ** 2 / 4, minor[i] ** 2 / 4
+        excess[0, i] = spread[i, 0] - (a2 * c * c + b2 * s * s)
+        excess[1, i] = spread[i, 1] - (a2 - b2) * c * s
+        excess[2, i] = spread[i, 2] - (a2 * s * s + b2 * c * c)
+    everyone = np.arange(n)
+    xx = _median_where(excess[0], valid, everyone, 1)
+    xy = _median_where(excess[1], valid, everyone, 1)
+    yy = _median_where(excess[2], valid, everyone, 1)
+    # Eigenvalues of the symmetric 2x2, the smaller raised to 0.1.
+    middle = 0.5 * (xx + yy)
+    radius = np.hypot(0.5 * (xx - yy), xy)
+    low, high = middle - radius, middle + radius
+    if low >= 0.1:
+        return np.array([[xx, xy], [xy, yy]])
+    # Unit eigenvector of the larger eigenvalue.
+    if radius == 0.0:
+        vx, vy = 1.0, 0.0
+    elif xx >= yy:
+        vx, vy = high - yy, xy
+    else:
+        vx, vy = xy, high - xx
+    norm = np.hypot(vx, vy)
+    vx, vy = vx / norm, vy / norm
+    high, low = max(high, 0.1), 0.1
+    return np.array([[high * vx * vx + low * vy * vy, (high - low) * vx * vy],
+                     [(high - low) * vx * vy, high * vy * vy + low * vx * vx]])
 
 
 @numba.njit(cache=True, nogil=True)

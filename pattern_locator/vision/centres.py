@@ -194,15 +194,9 @@ class _Windows:
         self.source = source if source.ndim == 3 else source[:, :, None]
         self.index, self.scale = index, scale
         self.off = (scale - 1) / 2.0
-        centre = (pred[index] - self.off) / scale
-        self.semi = semi[index] / scale
-        half = int(np.ceil(self.semi[:, 0].max())) + 2
-        self.size = 2 * half + 1
-        self.base = np.round(centre).astype(np.int64) - half              # window origin
-        self.axes = np.ascontiguousarray(axes[index], dtype=np.float32)
-        self.pred = centre - self.base
+        (self.base, self.size, self.axes, self.pred, self.semi,
+         self.to_plane) = spot_kernels.windows(index, scale, pred, axes, semi, to_plane)
         self.c = self.pred.copy()
-        self.to_plane = np.ascontiguousarray(to_plane[index] * scale, dtype=np.float32)
 
     def to_image(self, c: np.ndarray) -> np.ndarray:
         """Window coordinates (K, 2) -> image pixels."""
@@ -251,21 +245,18 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool),
                        np.zeros(n, dtype=bool), np.zeros(n), np.full((n, 3), np.nan), np.zeros(n),
                        np.zeros(n, dtype=bool))
-    U, sv, _ = np.linalg.svd(L)                                # axes of each spot's ellipse
-    major = sv[:, 0] * radii
-    minor = sv[:, 1] * radii
     # Window: the spot's ellipse, 1.2 times as big plus a margin for blur
     # and half the channel shift (the darkest channel is the union of the
-    # channels' dots), along its own axes.
+    # channels' dots), along its own axes. A degenerate homography would
+    # ask for windows bigger than the image: memory stays bounded by the
+    # image, nothing is measured.
     margin = 2.0 + 0.5 * params.max_channel_shift_px
-    semi = np.column_stack([1.2 * major + margin, 1.2 * minor + margin])
     h, w = dot_image.image.shape[:2]
-    # A degenerate homography would ask for windows bigger than the image:
-    # memory stays bounded by the image, nothing is measured.
-    if not (np.all(np.isfinite(semi)) and np.all(np.isfinite(pred))
-            and semi.max() <= 0.25 * max(h, w) and np.all(sv[:, 1] > 0)):
+    U, major, minor, semi, Linv, fit = spot_kernels.spot_shapes(
+        np.ascontiguousarray(L, dtype=np.float64), np.ascontiguousarray(radii, dtype=np.float64),
+        margin, np.ascontiguousarray(pred, dtype=np.float64), 0.25 * max(h, w))
+    if not fit:
         return out
-    Linv = np.linalg.inv(L)
     big = minor >= _DECIMATED_FROM if dot_image.scale > 1 else np.zeros(n, dtype=bool)
     groups = [_Windows(dot_image, index, scale, pred, U, semi, Linv)
               for index, scale in ((np.flatnonzero(~big), 1),
@@ -299,7 +290,6 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
     a spot that is not there drifts off towards whatever is dark nearby.
     """
     idx, s = g.index, g.scale
-    level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
     sigma = np.float32(paper.sigma / s)
     quiet = sigma if paper.quiet is None else min(sigma, np.float32(paper.quiet / s))
@@ -307,8 +297,8 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
      g.spread) = spot_kernels.first_pass(
         g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
         layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
-        level, quiet, core_margin, params.min_window_darkness, out.points, out.valid, out.peak,
-        out.area, out.inside)
+        pred, dot_image.white, dot_image.grid_step, quiet, core_margin,
+        params.min_window_darkness, out.points, out.valid, out.peak, out.area, out.inside)
     g.sigma = sigma
 
 

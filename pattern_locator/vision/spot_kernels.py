@@ -122,9 +122,106 @@ def _owned(owner, spot, qx, qy, half, resolution):
 
 
 @numba.njit(cache=True, nogil=True)
+def spot_shapes(L, radii, margin, predicted, largest):
+    """
+    Each spot's image ellipse from the local linear map ``L`` (N, 2, 2, pixels per metre).
+
+    The singular value decomposition of each 2x2 map in closed form (J.
+    Blinn's): its left singular vectors are the ellipse's axes (major
+    first), its singular values times the spot's radius its semi-axes. The
+    window's semi-axes are 1.2 times those plus ``margin``. Returns the
+    axes (N, 2, 2, as columns), major, minor, the windows' semi-axes (N, 2),
+    the inverse maps (metres per pixel), and whether all is fit to measure:
+    every window finite and no bigger than ``largest``, every map of full
+    rank and every prediction finite (else the inverses are not computed).
+    """
+    n = L.shape[0]
+    axes = np.empty((n, 2, 2))
+    major = np.empty(n)
+    minor = np.empty(n)
+    semi = np.empty((n, 2))
+    inverse = np.empty((n, 2, 2))
+    fit = True
+    for i in range(n):
+        a, b, c, d = L[i, 0, 0], L[i, 0, 1], L[i, 1, 0], L[i, 1, 1]
+        e, f, g, h = 0.5 * (a + d), 0.5 * (a - d), 0.5 * (c + b), 0.5 * (c - b)
+        q, r = np.hypot(e, h), np.hypot(f, g)
+        turn = 0.5 * (np.arctan2(h, e) + np.arctan2(g, f))
+        cos, sin = np.cos(turn), np.sin(turn)
+        axes[i, 0, 0], axes[i, 1, 0] = cos, sin
+        axes[i, 0, 1], axes[i, 1, 1] = -sin, cos
+        major[i] = (q + r) * radii[i]
+        minor[i] = abs(q - r) * radii[i]
+        semi[i, 0] = 1.2 * major[i] + margin
+        semi[i, 1] = 1.2 * minor[i] + margin
+        fit = fit and abs(q - r) > 0.0 and np.isfinite(semi[i, 0]) and np.isfinite(semi[i, 1]) \
+            and semi[i, 0] <= largest and semi[i, 1] <= largest \
+            and np.isfinite(predicted[i, 0]) and np.isfinite(predicted[i, 1])
+    if fit:
+        for i in range(n):
+            a, b, c, d = L[i, 0, 0], L[i, 0, 1], L[i, 1, 0], L[i, 1, 1]
+            det = a * d - b * c
+            inverse[i, 0, 0], inverse[i, 0, 1] = d / det, -b / det
+            inverse[i, 1, 0], inverse[i, 1, 1] = -c / det, a / det
+    return axes, major, minor, semi, inverse, fit
+
+
+@numba.njit(cache=True, nogil=True)
+def windows(index, scale, predicted, axes, semi, inverse):
+    """
+    The windows of spots ``index`` on the image decimated by ``scale`` (1: the image).
+
+    One size for all, from the largest semi-axis plus two pixels. Returns
+    each window's origin (K, 2, integer source pixels), the size, the
+    axes (float32), the predicted centre and the semi-axes in window
+    coordinates, and the metres per source pixel (float32).
+    """
+    k_count = len(index)
+    off = (scale - 1) / 2.0
+    widest = 0.0
+    for k in range(k_count):
+        widest = max(widest, semi[index[k], 0] / scale)
+    half = int(np.ceil(widest)) + 2
+    base = np.empty((k_count, 2), dtype=np.int64)
+    pred = np.empty((k_count, 2))
+    window_semi = np.empty((k_count, 2))
+    window_axes = np.empty((k_count, 2, 2), dtype=np.float32)
+    to_plane = np.empty((k_count, 2, 2), dtype=np.float32)
+    for k in range(k_count):
+        i = index[k]
+        for a in range(2):
+            centre = (predicted[i, a] - off) / scale
+            # Halves to even, as numpy's round; a window a billion pixels
+            # away is as far off the image as any (and an integer).
+            base[k, a] = int(min(max(np.rint(centre), -1e9), 1e9)) - half
+            pred[k, a] = centre - base[k, a]
+            window_semi[k, a] = semi[i, a] / scale
+            for b in range(2):
+                window_axes[k, a, b] = axes[i, a, b]
+                to_plane[k, a, b] = inverse[i, a, b] * scale
+    return base, 2 * half + 1, window_axes, pred, window_semi, to_plane
+
+
+@numba.njit(cache=True, nogil=True, inline='always')
+def _white_at(table, step, u, v):
+    """Bilinear look-up of the white grid at image point (u, v), as ``DotImage.white_at``."""
+    rows, cols = table.shape
+    gx = min(max((u + 0.5) / step - 0.5, 0.0), cols - 1.0)
+    gy = min(max((v + 0.5) / step - 0.5, 0.0), rows - 1.0)
+    x0 = min(int(gx), cols - 2) if cols > 1 else 0
+    y0 = min(int(gy), rows - 2) if rows > 1 else 0
+    fx = min(max(gx - x0, 0.0), 1.0)
+    fy = min(max(gy - y0, 0.0), 1.0)
+    x1 = min(x0 + 1, cols - 1)
+    y1 = min(y0 + 1, rows - 1)
+    return _F32((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
+                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+
+
+@numba.njit(cache=True, nogil=True)
 def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
-               owner, half, resolution, major, minor, linv, level, quiet, core_margin,
-               min_darkness, points, valid, peak, area, inside):
+               owner, half, resolution, major, minor, linv, predicted, white, grid_step, quiet,
+               core_margin, min_darkness, points, valid, peak, area, inside):
     """
     Gather each window's pixels, take the first, generous centroid and test the dots.
 
@@ -136,8 +233,10 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     ``to_plane`` metres per source pixel; ``spots``, ``plane_xy``,
     ``major``, ``minor`` (image pixels) and ``linv`` (metres per image
     pixel) are per spot, ``spots`` indexing the layout's ``owner`` raster
-    (``half``, ``resolution``: its geometry). ``level`` is each window's
-    local white, ``quiet`` the source's noise.
+    (``half``, ``resolution``: its geometry). ``white`` is the image's
+    local white on a grid (``grid_step`` pixels a cell), read at the
+    spots' ``predicted`` centres (image pixels); ``quiet`` is the source's
+    noise.
 
     Writes the centre (image pixels), the tests, the peak darkness and the
     area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
@@ -167,8 +266,9 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         bx, by = base[k, 0], base[k, 1]
         # Darkness below the local white, less a floor that keeps paper
         # noise out.
-        floor = max(_F32(0.04) * level[k], _F32(2.0) * quiet)
-        clear = level[k] - floor
+        level = _white_at(white, grid_step, predicted[i, 0], predicted[i, 1])
+        floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
+        clear = level - floor
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
         qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
         # On the card, inside its edge by two image pixels...
@@ -243,7 +343,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         # than a dot, and the window inside the image (a spot cut by the
         # border has a false centre).
         equivalent = mass / max(np.float64(best), np.float64(_F32(1e-6))) * scale * scale
-        relative = best / max(level[k], _F32(1.0))
+        relative = best / max(level, _F32(1.0))
         dark_enough = relative >= _F32(min_darkness) and best >= _F32(4.0) * quiet
         isolated = rim_sum / max(rim_count, 1) <= _F32(0.3) * best
         sized = equivalent <= 3.0 * (np.pi * major[i] * minor[i]) + 8.0 * (major[i] + 1.0)

@@ -38,11 +38,11 @@ from typing import Callable, List, Optional
 
 import numpy as np
 
+from . import spot_kernels
 from .camera import CameraModel
 from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
 from .dots import DotImage
-from . import spot_kernels
 from .stats import median
 
 # Spots at least this big (semi-minor axis, image pixels) are measured on the

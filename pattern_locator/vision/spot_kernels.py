@@ -169,7 +169,7 @@ def spot_shapes(L, radii, margin, predicted, largest):
 @numba.njit(cache=True, nogil=True)
 def windows(index, scale, predicted, axes, semi, inverse):
     """
-    The windows of spots ``index`` on the image decimated by ``scale`` (1: the image).
+    Lay out the windows of spots ``index`` on the image decimated by ``scale`` (1: the image).
 
     One size for all, from the largest semi-axis plus two pixels. Returns
     each window's origin (K, 2, integer source pixels), the size, the
@@ -435,7 +435,8 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
             for r in range(2):
                 for q in range(2):
                     ext += np.float64(axes[k, r, axis]) * blur[r, q] * np.float64(axes[k, q, axis])
-            tight[axis] = ((major[i] if axis == 0 else minor[i]) + 2.5 * np.sqrt(ext) + 1.0) / scale
+            semi_axis = major[i] if axis == 0 else minor[i]
+            tight[axis] = (semi_axis + 2.5 * np.sqrt(ext) + 1.0) / scale
         c0, c1 = centres[k, 0], centres[k, 1]
         ax0, ay0 = _F32(c0), _F32(c1)
         qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
@@ -488,7 +489,8 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
             for x in range(span[0], span[1]):
                 region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
         asymmetry = _asymmetry(weight, region, span, c0, c1, sigma, rows)
-        points[i, 0], points[i, 1] = (c0 + base[k, 0]) * scale + off, (c1 + base[k, 1]) * scale + off
+        points[i, 0] = (c0 + base[k, 0]) * scale + off
+        points[i, 1] = (c1 + base[k, 1]) * scale + off
         steady[k] = np.hypot(points[i, 0] - predicted[i, 0], points[i, 1] - predicted[i, 1]) \
             <= max(1.5, 0.3 * major[i] + 1.0)
         # Reflecting a dot a pixel or two thick by interpolation blurs it:
@@ -615,7 +617,7 @@ def _asymmetry(weight, region, span, c0, c1, sigma, rows):
 
 @numba.njit(cache=True, nogil=True)
 def _reflect_rows(a, c1, rows, y0, y1):
-    """Rows ``y0 .. y1 - 1`` of (S, S) ``a`` reflected through row ``c1``, bilinear, into ``rows``."""
+    """Reflect rows ``y0 .. y1 - 1`` of (S, S) ``a`` through row ``c1`` (bilinear) to ``rows``."""
     size = a.shape[0]
     for y in range(y0, y1):
         pos = 2.0 * c1 - y
@@ -783,7 +785,9 @@ def undo_channel_shift(channel_at, strength, limit, valid, points):
 @numba.njit(cache=True, nogil=True)
 def blur(spread, axes, major, minor, valid):
     """
-    The image's blur (2x2 covariance, image pixels^2) from the dots' second moments.
+    Estimate the image's defocus and motion as a covariance from the dots' second moments.
+
+    The covariance is 2x2, in image pixels^2.
 
     See :func:`~.centres._blur`: the median over the ``valid`` dots of each
     dot's ``spread`` (xx, xy, yy) less its sharp ellipse's (semi-axes

@@ -190,8 +190,11 @@ class _Windows:
                  pred: np.ndarray, axes: np.ndarray, semi: np.ndarray,
                  to_plane: np.ndarray) -> None:
         source = dot_image.image if scale == 1 else dot_image.small
-        # Grey as one channel: one signature for the kernels.
-        self.source = source if source.ndim == 3 else source[:, :, None]
+        # Grey as one channel, and read-only (a ROS image's buffer is): one
+        # signature for the kernels, not one compiled for each.
+        source = (source if source.ndim == 3 else source[:, :, None]).view()
+        source.flags.writeable = False
+        self.source = source
         self.index, self.scale = index, scale
         self.off = (scale - 1) / 2.0
         (self.base, self.size, self.axes, self.pred, self.semi,
@@ -444,3 +447,26 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
     offset, which is taken away.
     """
     spot_kernels.undo_channel_shift(channel_at, strength, limit, out.valid, out.points)
+
+
+def _load_kernels() -> None:
+    """
+    Measure two spots of a small blank image once, so that the kernels are ready.
+
+    numba compiles each kernel at its first call (or loads it from its cache
+    beside the module: a few tenths of a second); done here, at import, a
+    node's first frame is measured as fast as the others (a replayed bag's
+    first images are not dropped; the head tracks the first card at once).
+    """
+    from .dots import segment
+    image = np.full((48, 48, 3), 200, dtype=np.uint8)
+    dot_image = segment(image, DetectorParams(field='frame'))
+    layout = plane_layout(np.array([[-0.01, 0.0], [0.01, 0.0]]), np.full(2, 0.004), 0.02)
+    H = np.array([[400.0, 0.0, 24.0], [0.0, -400.0, 24.0], [0.0, 0.0, 1.0]])
+    measure_spots(dot_image, None, H, layout, np.arange(2), Paper(np.full(3, 200.0), 1.0, 1.0))
+    # The two only a dot partly covered by an object needs.
+    spot_kernels.box3(np.zeros((1, 1, 3), dtype=np.float32))
+    spot_kernels.ellipse(np.zeros((1, 2, 2), dtype=np.float32), np.zeros((1, 2)), np.ones((1, 2)), 1)
+
+
+_load_kernels()

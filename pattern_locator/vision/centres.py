@@ -466,7 +466,8 @@ def _load_kernels() -> None:
     measure_spots(dot_image, None, H, layout, np.arange(2), Paper(np.full(3, 200.0), 1.0, 1.0))
     # The two only a dot partly covered by an object needs.
     spot_kernels.box3(np.zeros((1, 1, 3), dtype=np.float32))
-    spot_kernels.ellipse(np.zeros((1, 2, 2), dtype=np.float32), np.zeros((1, 2)), np.ones((1, 2)), 1)
+    spot_kernels.ellipse(np.zeros((1, 2, 2), dtype=np.float32), np.zeros((1, 2)),
+                         np.ones((1, 2)), 1)
 
 
 _load_kernels()

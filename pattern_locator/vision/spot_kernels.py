@@ -12,6 +12,12 @@ The per-pixel quantities are computed in float32 in the same order as the
 numpy code they replace (so that a pixel on an ellipse's edge or a
 threshold falls on the same side), the sums over a window in float64.
 
+The kernels keep the GIL (``nogil=False``): each lasts a fraction of a
+millisecond, and one that lets it go must get it back from the node's
+other threads (the executor taking images and joint states), up to the
+interpreter's switch interval (5 ms) each time, a dozen times a frame: in
+the closed-loop demo under load that cost a third of the locations.
+
 numba checks no bounds: every index computed here is tested against the
 window's size or clipped to the image's shape before use. The caller
 validates the geometry (finite, windows no bigger than a quarter of the
@@ -24,7 +30,7 @@ import numpy as np
 _F32 = np.float32
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _ellipse_origin(axes, k, c0, c1):
     """Window point (c0, c1) along window ``k``'s ellipse axes, float32 (as the numpy code)."""
     ca = _F32(np.float64(axes[k, 0, 0]) * c0 + np.float64(axes[k, 1, 0]) * c1)
@@ -32,13 +38,13 @@ def _ellipse_origin(axes, k, c0, c1):
     return ca, cb
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _inverse_squares(s0, s1):
     """1 / semi-axis^2 along both axes, float32."""
     return _F32(1.0 / (s0 * s0)), _F32(1.0 / (s1 * s1))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _ellipse_at(axes, k, x, y, ca, cb, sa, sb):
     """Normalised squared radius (1 on the edge) of pixel (x, y) of window ``k``."""
     xf, yf = _F32(x), _F32(y)
@@ -47,7 +53,7 @@ def _ellipse_at(axes, k, x, y, ca, cb, sa, sb):
     return a * a * sa + b * b * sb
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _span(axes, k, c0, c1, s0, s1, size):
     """
     Pixel ranges (x from, x to, y from, y to; ends excluded) holding an ellipse.
@@ -63,7 +69,7 @@ def _span(axes, k, c0, c1, s0, s1, size):
             _start(c1 - ey, size), _stop(c1 + ey, size))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _start(v, size):
     """First index of a range from ``v`` (at least 0; all of it if ``v`` is NaN)."""
     if not v > 0.0:
@@ -71,7 +77,7 @@ def _start(v, size):
     return size if v >= size else int(v)
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _stop(v, size):
     """End (excluded) of a range up to ``v`` (at most ``size``; all of it if ``v`` is NaN)."""
     if not v < size - 1.0:
@@ -79,7 +85,7 @@ def _stop(v, size):
     return 0 if v < -1.0 else int(v) + 2
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def ellipse(axes, c, semi, size):
     """
     Normalised squared radius (K, S, S) of every pixel of every window.
@@ -98,7 +104,7 @@ def ellipse(axes, c, semi, size):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0):
     """Card-plane position (float32) of pixel (x, y); window point (ax0, ay0) is (qx0, qy0)."""
     dx = _F32(x) - ax0
@@ -108,7 +114,7 @@ def _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0):
     return qx, qy
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _owned(owner, spot, qx, qy, half, resolution):
     """Whether card-plane point (qx, qy) lies in the raster cell of layout spot ``spot``."""
     n = owner.shape[0]
@@ -121,7 +127,7 @@ def _owned(owner, spot, qx, qy, half, resolution):
     return owner[int(row), int(col)] == spot
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def spot_shapes(L, radii, margin, predicted, largest):
     """
     Each spot's image ellipse from the local linear map ``L`` (N, 2, 2, pixels per metre).
@@ -166,7 +172,7 @@ def spot_shapes(L, radii, margin, predicted, largest):
     return axes, major, minor, semi, inverse, fit
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def windows(index, scale, predicted, axes, semi, inverse):
     """
     Lay out the windows of spots ``index`` on the image decimated by ``scale`` (1: the image).
@@ -202,7 +208,7 @@ def windows(index, scale, predicted, axes, semi, inverse):
     return base, 2 * half + 1, window_axes, pred, window_semi, to_plane
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _white_at(table, step, u, v):
     """Bilinear look-up of the white grid at image point (u, v), as ``DotImage.white_at``."""
     rows, cols = table.shape
@@ -218,7 +224,7 @@ def _white_at(table, step, u, v):
                 + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
                owner, half, resolution, major, minor, linv, predicted, white, grid_step, quiet,
                core_margin, min_darkness, points, valid, peak, area, inside):
@@ -359,7 +365,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     return pixels, in_image, raw, weight, cell, window, on_card, centres, top, spread
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _centroid(weight, axes, k, c0, c1, s0, s1):
     """Weighted centroid of one window's ``weight`` within the ellipse (s0, s1) about (c0, c1)."""
     size = weight.shape[0]
@@ -379,7 +385,7 @@ def _centroid(weight, axes, k, c0, c1, s0, s1):
     return c0, c1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _box3_at(a, x, y):
     """3x3 mean of (S, S) ``a`` at (x, y), the window's edge pixels repeated beyond it."""
     size = a.shape[0]
@@ -393,7 +399,7 @@ def _box3_at(a, x, y):
     return _F32(total * (1.0 / 9.0))
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base, scale, index,
               major, minor, blur, sigma, to_plane, spots, plane_xy, owner, half, resolution,
               points, predicted, valid, readable):
@@ -530,7 +536,7 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
     return out_c, connected
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _median_where(values, chosen, index, least):
     """
     Median of ``values[k]`` where ``chosen[index[k]]``; 0 when fewer than ``least`` are.
@@ -558,7 +564,7 @@ def _median_where(values, chosen, index, least):
     return picked[m] if n % 2 else (picked[m - 1] + picked[m]) / 2
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _flood(dark, keep, start, stack):
     """Set ``keep`` over the 8-connected region of ``dark`` holding flat index ``start``."""
     size = dark.shape[0]
@@ -578,7 +584,7 @@ def _flood(dark, keep, start, stack):
                     depth += 1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _asymmetry(weight, region, span, c0, c1, sigma, rows):
     """
     How far ``weight`` is from point-symmetric about (c0, c1), less the noise.
@@ -615,7 +621,7 @@ def _asymmetry(weight, region, span, c0, c1, sigma, rows):
     return difference / total - noise
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _reflect_rows(a, c1, rows, y0, y1):
     """Reflect rows ``y0 .. y1 - 1`` of (S, S) ``a`` through row ``c1`` (bilinear) to ``rows``."""
     size = a.shape[0]
@@ -630,7 +636,7 @@ def _reflect_rows(a, c1, rows, y0, y1):
             rows[y, x] = (_F32(1.0) - f) * r0 + f * r1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _reflect_column(rows, y, x, c0):
     """Pixel (x, y) of the row-reflected ``rows`` reflected through column ``c0``, bilinear."""
     size = rows.shape[0]
@@ -643,13 +649,13 @@ def _reflect_column(rows, y, x, c0):
     return (_F32(1.0) - f) * r0 + f * r1
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def _floor_index(v, size):
     """floor(v) as an index, or -2 (off the window either way) when far outside ``0 .. size``."""
     return int(np.floor(v)) if -2.0 <= v <= size + 1.0 else -2
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def colours(pixels, table, cell, window, connected, axes, centres, pred, base, scale, index,
             major, minor, max_shift, valid, readable, colour, channel_at, strength):
     """
@@ -740,7 +746,7 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
     return dark
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def undo_channel_shift(channel_at, strength, limit, valid, points):
     """
     Move each point by its ink's channel shift (see :func:`~.centres._undo_channel_shift`).
@@ -782,7 +788,7 @@ def undo_channel_shift(channel_at, strength, limit, valid, points):
             points[i, axis] = points[i, axis] - bias / count
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def blur(spread, axes, major, minor, valid):
     """
     Estimate the image's defocus and motion as a covariance from the dots' second moments.
@@ -833,7 +839,7 @@ def blur(spread, axes, major, minor, valid):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=False)
 def box3(a):
     """3x3 mean of each channel of one (S, S, C) float32 window, its edge pixels repeated."""
     size, channels = a.shape[0], a.shape[2]

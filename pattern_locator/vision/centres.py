@@ -196,14 +196,9 @@ class _Windows:
         source.flags.writeable = False
         self.source = source
         self.index, self.scale = index, scale
-        self.off = (scale - 1) / 2.0
         (self.base, self.size, self.axes, self.pred, self.semi,
          self.to_plane) = spot_kernels.windows(index, scale, pred, axes, semi, to_plane)
         self.c = self.pred.copy()
-
-    def to_image(self, c: np.ndarray) -> np.ndarray:
-        """Window coordinates (K, 2) -> image pixels."""
-        return (c + self.base) * self.scale + self.off
 
     def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
         """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
@@ -266,7 +261,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
-                    core_margin, out, refine)
+                    core_margin, out)
     if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)
@@ -280,7 +275,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
                 paper: Paper, params: DetectorParams, core_margin: float,
-                out: SpotMeasures, refine: bool = True) -> None:
+                out: SpotMeasures) -> None:
     """
     Centroid in a generous window, and the tests of a dot, written into ``out``.
 

@@ -36,9 +36,9 @@ over the inner part of the dot at that shift, well clear of any neighbour.
 from dataclasses import dataclass
 from typing import Callable, List, Optional
 
-import cv2
 import numpy as np
 
+from . import spot_kernels
 from .camera import CameraModel
 from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
@@ -177,108 +177,33 @@ def plane_layout(points: np.ndarray, radii: np.ndarray, card_half: float,
 
 class _Windows:
     """
-    The windows of a group of spots, gathered at once from one image.
+    The windows of a group of spots, measured at once on one image.
 
     Coordinates are the source image's pixels relative to each window's
     integer origin (``base``); the source is the image (scale 1) or the
     image decimated by ``scale``, whose pixel (x, y) covers image pixels
-    ``scale * x .. scale * x + scale - 1``.
+    ``scale * x .. scale * x + scale - 1``. The passes over the windows'
+    pixels are :mod:`.spot_kernels`; their results are kept here.
     """
 
     def __init__(self, dot_image: DotImage, index: np.ndarray, scale: int,
                  pred: np.ndarray, axes: np.ndarray, semi: np.ndarray,
                  to_plane: np.ndarray) -> None:
         source = dot_image.image if scale == 1 else dot_image.small
-        h, w = source.shape[:2]
+        # Grey as one channel, and read-only (a ROS image's buffer is): one
+        # signature for the kernels, not one compiled for each.
+        source = (source if source.ndim == 3 else source[:, :, None]).view()
+        source.flags.writeable = False
+        self.source = source
         self.index, self.scale = index, scale
-        self.off = (scale - 1) / 2.0
-        centre = (pred[index] - self.off) / scale
-        self.semi = semi[index] / scale
-        half = int(np.ceil(self.semi[:, 0].max())) + 2
-        size = 2 * half + 1
-        self.base = np.round(centre).astype(np.intp) - half              # window origin
-        j = np.arange(size)
-        bx, by = self.base[:, 0], self.base[:, 1]
-        if len(bx) and bx.min() >= 0 and by.min() >= 0 and bx.max() <= w - size \
-                and by.max() <= h - size:
-            # Every window inside the image (the usual case): views of the
-            # image copied at once, no index arrays.
-            self.in_image = np.ones((len(bx), size, size), dtype=bool)
-            # (y, x, row, column[, channel]): every window of the image, a view.
-            views = np.lib.stride_tricks.as_strided(
-                source, (h - size + 1, w - size + 1, size, size) + source.shape[2:],
-                source.strides[:2] + source.strides, writeable=False)
-            self.pixels = views[by, bx]                                  # (K, S, S[, 3])
-        else:
-            xs = bx[:, None, None] + j[None, None, :]
-            ys = by[:, None, None] + j[None, :, None]
-            self.in_image = (xs >= 0) & (xs < w) & (ys >= 0) & (ys < h)
-            self.pixels = source[np.clip(ys, 0, h - 1), np.clip(xs, 0, w - 1)]   # (K, S, S[, 3])
-        self.X = j.astype(np.float32)[None, None, :]
-        self.Y = j.astype(np.float32)[None, :, None]
-        self.axes = axes[index].astype(np.float32)
-        ax = self.axes
-        # Each pixel's coordinates along the spot's ellipse axes.
-        self.A0 = ax[:, 0, 0, None, None] * self.X + ax[:, 1, 0, None, None] * self.Y
-        self.B0 = ax[:, 0, 1, None, None] * self.X + ax[:, 1, 1, None, None] * self.Y
-        self.pred = centre - self.base
+        (self.base, self.size, self.axes, self.pred, self.semi,
+         self.to_plane) = spot_kernels.windows(index, scale, pred, axes, semi, to_plane)
         self.c = self.pred.copy()
-        self.to_plane = (to_plane[index] * scale).astype(np.float32)     # metres per pixel
-        self._parts_key = None
-
-    def to_image(self, c: np.ndarray) -> np.ndarray:
-        """Window coordinates (K, 2) -> image pixels."""
-        return (c + self.base) * self.scale + self.off
 
     def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
         """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
-        key = c.tobytes()
-        if self._parts_key != key:
-            ax = self.axes
-            ca = (ax[:, 0, 0] * c[:, 0] + ax[:, 1, 0] * c[:, 1]).astype(np.float32)
-            cb = (ax[:, 0, 1] * c[:, 0] + ax[:, 1, 1] * c[:, 1]).astype(np.float32)
-            a = self.A0 - ca[:, None, None]
-            b = self.B0 - cb[:, None, None]
-            self._parts, self._parts_key = (a * a, b * b), key
-        a2, b2 = self._parts
-        sa = (1.0 / semi[:, 0] ** 2).astype(np.float32)[:, None, None]
-        sb = (1.0 / semi[:, 1] ** 2).astype(np.float32)[:, None, None]
-        return a2 * sa + b2 * sb
-
-    def plane(self, anchor: np.ndarray, anchor_xy: np.ndarray):
-        """Return each pixel's card-plane position; the spot at ``anchor`` is at ``anchor_xy``."""
-        m = self.to_plane
-        dx = self.X - anchor[:, 0, None, None].astype(np.float32)
-        dy = self.Y - anchor[:, 1, None, None].astype(np.float32)
-        qx = anchor_xy[:, 0, None, None].astype(np.float32) + m[:, 0, 0, None, None] * dx \
-            + m[:, 0, 1, None, None] * dy
-        qy = anchor_xy[:, 1, None, None].astype(np.float32) + m[:, 1, 0, None, None] * dx \
-            + m[:, 1, 1, None, None] * dy
-        return qx, qy
-
-    def cells(self, layout: PlaneLayout, spot: np.ndarray, anchor: np.ndarray) -> np.ndarray:
-        """Pixels whose place on the card belongs to each window's spot (a layout index)."""
-        qx, qy = self.plane(anchor, layout.points[spot])
-        n = layout.owner.shape[0]
-        col = ((qx + layout.half) / layout.resolution).astype(np.intp)
-        row = ((layout.half - qy) / layout.resolution).astype(np.intp)
-        inside = (col >= 0) & (col < n) & (row >= 0) & (row < n)
-        # One flat index into the raster: cheaper than a pair of index arrays.
-        owner = np.take(layout.owner.ravel(), np.clip(row, 0, n - 1) * n + np.clip(col, 0, n - 1))
-        return inside & (owner == spot[:, None, None]), qx, qy
-
-    def centroid(self, weight: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """Weighted centroid of each window (``c`` where a window has no weight)."""
-        # Column and row sums: two passes over the windows instead of three
-        # products and three sums.
-        columns = weight.sum(axis=1)                                 # (K, S)
-        rows = weight.sum(axis=2)
-        total = columns.sum(axis=1)
-        good = total > 0
-        safe = np.where(good, total, 1.0)
-        cx = columns @ self.X[0, 0] / safe
-        cy = rows @ self.Y[0, :, 0] / safe
-        return np.where(good[:, None], np.column_stack([cx, cy]), c)
+        return spot_kernels.ellipse(self.axes, np.ascontiguousarray(c, dtype=np.float64),
+                                    np.ascontiguousarray(semi, dtype=np.float64), self.size)
 
 
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
@@ -302,7 +227,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     params = dot_image.params
     if core_margin is None:
         core_margin = params.max_channel_shift_px + 1.0
-    spots = np.asarray(spots)
+    spots = np.ascontiguousarray(spots, dtype=np.int64)
     plane_xy, radii = layout.points[spots], layout.radii[spots]
     n = len(spots)
     und = apply_h(H, plane_xy)
@@ -318,28 +243,25 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool),
                        np.zeros(n, dtype=bool), np.zeros(n), np.full((n, 3), np.nan), np.zeros(n),
                        np.zeros(n, dtype=bool))
-    U, sv, _ = np.linalg.svd(L)                                # axes of each spot's ellipse
-    major = sv[:, 0] * radii
-    minor = sv[:, 1] * radii
     # Window: the spot's ellipse, 1.2 times as big plus a margin for blur
     # and half the channel shift (the darkest channel is the union of the
-    # channels' dots), along its own axes.
+    # channels' dots), along its own axes. A degenerate homography would
+    # ask for windows bigger than the image: memory stays bounded by the
+    # image, nothing is measured.
     margin = 2.0 + 0.5 * params.max_channel_shift_px
-    semi = np.column_stack([1.2 * major + margin, 1.2 * minor + margin])
     h, w = dot_image.image.shape[:2]
-    # A degenerate homography would ask for windows bigger than the image:
-    # memory stays bounded by the image, nothing is measured.
-    if not (np.all(np.isfinite(semi)) and np.all(np.isfinite(pred))
-            and semi.max() <= 0.25 * max(h, w) and np.all(sv[:, 1] > 0)):
+    U, major, minor, semi, Linv, fit = spot_kernels.spot_shapes(
+        np.ascontiguousarray(L, dtype=np.float64), np.ascontiguousarray(radii, dtype=np.float64),
+        margin, np.ascontiguousarray(pred, dtype=np.float64), 0.25 * max(h, w))
+    if not fit:
         return out
-    Linv = np.linalg.inv(L)
     big = minor >= _DECIMATED_FROM if dot_image.scale > 1 else np.zeros(n, dtype=bool)
     groups = [_Windows(dot_image, index, scale, pred, U, semi, Linv)
               for index, scale in ((np.flatnonzero(~big), 1),
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
-                    core_margin, out, refine)
+                    core_margin, out)
     if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)
@@ -353,71 +275,29 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
                 paper: Paper, params: DetectorParams, core_margin: float,
-                out: SpotMeasures, refine: bool = True) -> None:
-    """Centroid in a generous window, and the tests of a dot, written into ``out``."""
+                out: SpotMeasures) -> None:
+    """
+    Centroid in a generous window, and the tests of a dot, written into ``out``.
+
+    The darkness (below the local white, less a floor that keeps paper
+    noise out) in the spot's share of the window, on the card inside its
+    edge by two image pixels (blur carries what is beyond onto it) but
+    never closer than a pixel and a half round the spot itself (a steep
+    view brings the edge that close, and cutting the spot's own blur would
+    pull its centre). Its peak (3x3 mean) is taken where the spot should be:
+    a spot that is not there drifts off towards whatever is dark nearby.
+    """
     idx, s = g.index, g.scale
-    pixels = g.pixels
-    level = dot_image.white_at(pred[idx, 0], pred[idx, 1]).astype(np.float32)
-    # Channel by channel: numpy's reduction over a last axis of three is slow.
-    dark = (pixels if pixels.ndim == 3 else np.minimum(np.minimum(
-        pixels[..., 0], pixels[..., 1]), pixels[..., 2])).astype(np.float32)
     # Noise of the source image: decimation averages s * s pixels.
-    sigma = np.full(len(idx), paper.sigma / s, dtype=np.float32)
-    quiet = sigma if paper.quiet is None else np.minimum(sigma, np.float32(paper.quiet / s))
-    floor = np.maximum(0.04 * level, 2.0 * quiet)
-    raw = np.maximum((level - floor)[:, None, None] - dark, 0.0)
-    weight = raw
-    mine, qx, qy = g.cells(layout, spots[idx], g.pred)
-    # On the card, inside its edge by two image pixels (blur carries what is
-    # beyond onto it)...
-    room_x = (layout.half - 2.0 * np.hypot(Linv[idx, 0, 0], Linv[idx, 0, 1])).astype(np.float32)
-    room_y = (layout.half - 2.0 * np.hypot(Linv[idx, 1, 0], Linv[idx, 1, 1])).astype(np.float32)
-    on_card = (np.abs(qx) < room_x[:, None, None]) & (np.abs(qy) < room_y[:, None, None])
-    # ...but never closer than a pixel and a half round the spot itself: a
-    # steep view brings the edge that close, and cutting the spot's own blur
-    # would pull its centre.
-    own = g.ellipse(g.pred, np.column_stack([major[idx], minor[idx]]) / s + 1.5) <= 1.0
-    cell = g.in_image & mine & (on_card | own)
-    weight = weight * cell
-    semi = g.semi
-    c = g.c
-    for _ in range(2):
-        c = g.centroid(weight * (g.ellipse(c, semi) <= 1.0), c)
-    e = g.ellipse(c, semi)
-    window = e <= 1.0
-    # Peak darkness (3x3 mean) where the spot should be: a spot that is not
-    # there drifts off towards whatever is dark nearby.
-    core = np.minimum((major[idx] / s + core_margin / s) ** 2 / semi[:, 0] ** 2, 1.0)
-    top = (_box3(weight) * (g.ellipse(g.pred, semi) <= core[:, None, None])).max(axis=(1, 2))
-    rim = window & (e > 0.6) & cell
-    rim_mean = (weight * rim).sum(axis=(1, 2)) / np.maximum(rim.sum(axis=(1, 2)), 1)
-    wd = weight * window
-    mass = wd.sum(axis=(1, 2))
-    equivalent = mass / np.maximum(top, 1e-6) * s * s              # image pixels
-    expected = np.pi * major[idx] * minor[idx]
-    relative = top / np.maximum(level, 1.0)
-    dark_enough = (relative >= params.min_window_darkness) & (top >= 4.0 * quiet)
-    isolated = rim_mean <= 0.3 * top
-    sized = equivalent <= 3.0 * expected + 8.0 * (major[idx] + 1.0)
-    # A window beyond the border: a spot cut by it has a false centre.
-    whole = (g.in_image | ~window).all(axis=(1, 2))
-    out.inside[idx] = whole
-    out.points[idx] = g.to_image(c)
-    out.valid[idx] = whole & dark_enough & isolated & sized
-    g.tests = {'whole': whole, 'dark': dark_enough, 'isolated': isolated, 'sized': sized}
-    out.peak[idx] = relative
-    out.area[idx] = equivalent
-    g.c, g.cell, g.window = c, cell, window
-    g.on_card, g.weight, g.top, g.sigma = on_card | own, weight, top, sigma
-    if not refine:
-        return
-    # Spread of each spot's darkness (image pixels^2), for the blur.
-    total = np.maximum(mass, 1e-6)
-    dx = g.X - c[:, 0, None, None].astype(np.float32)
-    dy = g.Y - c[:, 1, None, None].astype(np.float32)
-    g.spread = np.stack([(wd * dx * dx).sum(axis=(1, 2)), (wd * dx * dy).sum(axis=(1, 2)),
-                         (wd * dy * dy).sum(axis=(1, 2))], axis=1) / total[:, None] * (s * s)
-    g.raw = raw * g.in_image
+    sigma = np.float32(paper.sigma / s)
+    quiet = sigma if paper.quiet is None else min(sigma, np.float32(paper.quiet / s))
+    (g.pixels, g.in_image, g.raw, g.weight, g.cell, g.window, g.on_card, g.c, g.top,
+     g.spread) = spot_kernels.first_pass(
+        g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
+        layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
+        pred, dot_image.white, dot_image.grid_step, quiet, core_margin,
+        params.min_window_darkness, out.points, out.valid, out.peak, out.area, out.inside)
+    g.sigma = sigma
 
 
 def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
@@ -428,19 +308,12 @@ def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.nd
     A sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along
     its axes; blur adds its own covariance to every dot alike (defocus in
     all directions, motion along one). The median over the dots resists a
-    few spoilt by neighbours or objects.
+    few spoilt by neighbours or objects. Its eigenvalues are at least 0.1.
     """
     spread = np.full((len(valid), 3), np.nan)
     for g in groups:
         spread[g.index] = g.spread
-    c, s = U[:, 0, 0], U[:, 1, 0]                       # major axis direction
-    a2, b2 = major ** 2 / 4, minor ** 2 / 4
-    sharp = np.column_stack([a2 * c * c + b2 * s * s, (a2 - b2) * c * s, a2 * s * s + b2 * c * c])
-    if np.count_nonzero(valid) < 3:
-        return 0.25 * np.eye(2)
-    xx, xy, yy = median(spread[valid] - sharp[valid], axis=0)
-    evals, evecs = np.linalg.eigh(np.array([[xx, xy], [xy, yy]]))
-    return evecs @ np.diag(np.clip(evals, 0.1, None)) @ evecs.T
+    return spot_kernels.blur(spread, U, major, minor, valid)
 
 
 def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.ndarray,
@@ -452,133 +325,26 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
     The first windows were generous (the blur was unknown) and shared as the
     prediction put the spots; now they are shared about the measured centre.
     An object next to a dot, or the card's edge, would pull a centroid taken
-    in a generous window.
-    """
-    idx, s = g.index, g.scale
-    axes = g.axes.astype(np.float64)
-    # The blur's extent (2.5 sigma) along each dot's axes, plus a pixel.
-    ext = np.column_stack([np.sqrt(np.einsum('ki,ij,kj->k', axes[:, :, a], blur, axes[:, :, a]))
-                           for a in (0, 1)])
-    tight = (np.column_stack([major[idx], minor[idx]]) + 2.5 * ext + 1.0) / s
-    c = g.c
-    mine = g.cells(layout, spots[idx], c)[0]
-    weight = g.raw * mine * g.on_card
-    # Dark things in the window apart from the dot (an object a pixel or
-    # two away, a neighbour's blur) are not the dot's: its own dark region is
-    # the connected one at its centre.
-    connected = _own_region(weight, g.top, c)
-    weight = weight * connected
-    g.connected = connected
-    for _ in range(2):
-        c = g.centroid(weight * (g.ellipse(c, tight) <= 1.0), c)
-    region = g.ellipse(c, tight) <= 1.0
-    out.points[idx] = g.to_image(c)
-    steady = np.hypot(*(out.points[idx] - pred[idx]).T) <= np.maximum(1.5, 0.3 * major[idx] + 1.0)
-    # Reflecting a dot a pixel or two thick by interpolation blurs it: more
-    # room for thin dots.
-    grid = 0.15 / np.maximum(minor[idx] / s, 0.5)
-    g.asymmetry = _asymmetry(g, weight, region & mine, c, g.sigma)
-    # An object touching the dot joins its dark region beyond the dot and
-    # its blur.
-    beyond = g.window & mine & (g.ellipse(c, tight + 1.0) > 1.0)
-    stained = np.count_nonzero(beyond & (weight > 0.25 * g.top[:, None, None]), axis=(1, 2))
-    touched = stained > 0.1 * np.count_nonzero(beyond, axis=(1, 2)) + 1
-    exists = out.valid[idx].copy()
-    out.valid[idx] &= steady & (g.asymmetry <= 0.08 + grid) & ~touched
-    g.tests.update(steady=steady, symmetric=g.asymmetry <= 0.08 + grid, untouched=~touched)
-    # Its colour may still be read where the geometry may not: a dot touched
-    # by an object, or with an object over part of its rim, has a clean
-    # inner part (ink is even there). Too small a dot to tell: not read.
-    inner = np.column_stack([0.6 * major[idx] + 0.7, 0.6 * minor[idx] + 0.7]) / s
-    core = (g.ellipse(g.pred, inner) <= 1.0) & mine
-    count = np.maximum(core.sum(axis=(1, 2)), 1)
-    mean = (g.weight * core).sum(axis=(1, 2)) / count
-    spread = np.sqrt(np.maximum((g.weight ** 2 * core).sum(axis=(1, 2)) / count - mean ** 2, 0))
-    # Evenness against the dots that passed everything (same blur, same size).
-    relative = spread / np.maximum(mean, 1e-6)
-    typical = median(relative[out.valid[idx]]) if np.count_nonzero(out.valid[idx]) >= 3 \
-        else 0.0
-    even = (relative <= 1.3 * typical + 0.03) & (minor[idx] >= 2.5)
-    out.readable[idx] = out.valid[idx] | (exists & steady & even)
-    g.tests.update(even=even, spread=relative)
-    g.c = c
-
-
-def _asymmetry(g: _Windows, weight: np.ndarray, region: np.ndarray, c: np.ndarray,
-               sigma: np.ndarray) -> np.ndarray:
-    """
-    How far each spot's darkness is from point-symmetric about its centre, less the noise.
+    in a generous window. Dark things in the window apart from the dot (an
+    object a pixel or two away, a neighbour's blur) are not the dot's: its
+    own dark region is the connected one at its centre (dark: a quarter of
+    its peak; the region with the darkest pixel within a pixel and a half
+    of the centre).
 
     A dot's image is point-symmetric, blurred or not (and so is the union of
     its colour channels shifted opposite ways); a dot partly hidden, or
-    touched by an object, is not. Compared where both a pixel and its
-    reflection belong to the spot, so that sharing pixels with a close
-    neighbour cuts both sides alike. Returns |w - reflected w| / (w +
-    reflected w) summed, less what the pixel noise alone gives (|difference
-    of two noisy pixels| is 1.13 sigma on average).
+    touched by an object, is not. Its asymmetry is compared where both a
+    pixel and its reflection through the centre (bilinear) belong to the
+    spot, so that sharing pixels with a close neighbour cuts both sides
+    alike: |w - reflected w| / (w + reflected w) summed, less what the pixel
+    noise alone gives (|difference of two noisy pixels| is 1.13 sigma on
+    average). A dot must also stay near its prediction, and its dark region
+    must not reach beyond the dot and its blur (an object touching it).
     """
-    region = region.astype(np.float32)
-    both = region * (_point_reflection(region, c, nearest=True) > 0.5)
-    own = weight * both
-    mirror = _point_reflection(weight, c) * both
-    total = np.maximum((own + mirror).sum(axis=(1, 2)), 1e-6)
-    noise = 1.13 * sigma * np.count_nonzero(own > 0, axis=(1, 2)) / total
-    return np.abs(own - mirror).sum(axis=(1, 2)) / total - noise
-
-
-def _point_reflection(a: np.ndarray, c: np.ndarray, nearest: bool = False) -> np.ndarray:
-    """
-    Each (K, S, S) window reflected through its point ``c`` (window coordinates); 0 outside.
-
-    Bilinear (the interpolation weights are the same for every pixel of a
-    window, and separable: rows, then columns), or to the nearest pixel.
-    """
-    k, s, _ = a.shape
-    j = np.arange(s)
-    rows = np.arange(k)[:, None]
-    out = a
-    for axis, coord in ((1, c[:, 1]), (2, c[:, 0])):
-        pos = 2.0 * coord[:, None] - j[None, :]                        # (K, S)
-        base = np.floor(pos + (0.5 if nearest else 0.0)).astype(np.intp)
-        shape = (k, s, 1) if axis == 1 else (k, 1, s)
-        # Whole rows (or columns, transposed) gathered from the window padded
-        # with a zero on each side: an index off the window reads a zero.
-        padded = np.zeros((k, s + 2, s), dtype=out.dtype)
-        padded[:, 1:s + 1] = out if axis == 1 else out.transpose(0, 2, 1)
-
-        def pick(index, padded=padded, axis=axis):
-            got = padded[rows, np.clip(index, -1, s) + 1]
-            return got if axis == 1 else got.transpose(0, 2, 1)
-
-        if nearest:
-            out = pick(base)
-        else:
-            f = (pos - base).astype(np.float32).reshape(shape)
-            out = (1 - f) * pick(base) + f * pick(base + 1)
-    return out
-
-
-def _own_region(weight: np.ndarray, top: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """
-    Mask (K, S, S) of each window less the dark regions not connected to its centre.
-
-    Dark is a quarter of the spot's peak; light pixels (the dot's blurred
-    rim, paper) are kept. The spot's region is the one with the darkest
-    pixel within a pixel and a half of its centre. All windows are labelled
-    in one call, stacked with a blank row between them.
-    """
-    k, s, _ = weight.shape
-    dark = weight > 0.25 * np.maximum(top, 1e-6)[:, None, None]
-    stack = np.zeros((k, s + 1, s), dtype=np.uint8)
-    stack[:, :s] = dark
-    _, labels = cv2.connectedComponents(stack.reshape(k * (s + 1), s), connectivity=8)
-    labels = labels.reshape(k, s + 1, s)[:, :s]
-    j = np.arange(s)
-    near = (np.abs(j[None, None, :] - c[:, 0, None, None]) <= 1.5) \
-        & (np.abs(j[None, :, None] - c[:, 1, None, None]) <= 1.5)
-    best = np.argmax((weight * near).reshape(k, -1), axis=1)
-    own = labels.reshape(k, -1)[np.arange(k), best]
-    return ~((labels > 0) & (labels != own[:, None, None]))
+    g.c, g.connected = spot_kernels.last_pass(
+        g.raw, g.on_card, g.weight, g.window, g.top, g.c, g.pred, g.axes, g.base, g.scale,
+        g.index, major, minor, blur, g.sigma, g.to_plane, spots, layout.points[spots],
+        layout.owner, layout.half, layout.resolution, out.points, pred, out.valid, out.readable)
 
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
@@ -591,53 +357,26 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
     grown by the largest channel shift: a channel displaced by a pixel or
     two has its peak displaced, not lowered. The window is shared with the
     neighbours as the card's plane is, and dark things not joined to the dot
-    are left out, so no neighbour's or object's colour comes in.
+    are left out, so no neighbour's or object's colour comes in. A dot read
+    for its colour alone (not valid) must be even in every channel there,
+    as the sure dots are: not half ink, half something else.
     """
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
-    table = 1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma          # (256, 3)
+    table = np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma,
+                                 dtype=np.float32)                                 # (256, 3)
     n = len(out.valid)
     channel_at = np.full((n, 3, 2), np.nan)
     strength = np.zeros((n, 3))
     for g in groups:
-        idx = g.index
-        k, size = g.pixels.shape[:2]
-        # A lookup table per channel (OpenCV's LUT: one pass, no index arrays).
-        d = cv2.LUT(g.pixels.reshape(k * size, size, 3),
-                    table.reshape(256, 1, 3)).reshape(g.pixels.shape)           # (K, S, S, 3)
-        # Where each channel's image of the dot is.
-        w = np.maximum(d - 0.1, 0.0) * (g.cell & g.window & g.connected)[..., None]
-        total = np.maximum(w.sum(axis=(1, 2)), 1e-6)                            # (K, 3)
-        cx = np.einsum('kijc,j->kc', w, g.X[0, 0]) / total
-        cy = np.einsum('kijc,i->kc', w, g.Y[0, :, 0]) / total
-        channel_at[idx] = (np.stack([cx, cy], axis=-1) + g.base[:, None, :]) * g.scale + g.off
-        strength[idx] = total
-        smooth = cv2.blur(np.ascontiguousarray(d.reshape(k * size, size, 3)), (3, 3),
-                          borderType=cv2.BORDER_REPLICATE).reshape(d.shape)
-        # The dot's inner part grown by the shift, clear of anything beside
-        # the dot; for a dot touched by something, not grown (and around
-        # where it should be).
-        sure = out.valid[idx][:, None]
-        inner = 0.6 * np.column_stack([major[idx], minor[idx]]) + 0.7
-        grown = (inner + np.where(sure, params.max_channel_shift_px, 0.0)) / g.scale
-        at = np.where(sure, g.c, g.pred)
-        core = (g.ellipse(at, grown) <= 1.0) & g.cell & g.connected
-        out.colour[idx] = (smooth * core[..., None]).reshape(k, size * size, 3).max(axis=1)
-        # A dot read for its colour alone must be even in every channel
-        # there, as the sure dots are: not half ink, half something else.
-        doubtful = out.readable[idx] & ~out.valid[idx]
-        if np.any(doubtful):
-            count = np.maximum(core.sum(axis=(1, 2)), 1)[:, None]
-            mean = (d * core[..., None]).sum(axis=(1, 2)) / count
-            var = (d * d * core[..., None]).sum(axis=(1, 2)) / count - mean ** 2
-            spread = np.sqrt(np.maximum(var, 0.0)).max(axis=1)
-            typical = median(spread[out.valid[idx]]) if np.count_nonzero(
-                out.valid[idx]) >= 3 else 0.0
-            out.readable[idx] &= ~doubtful | (spread <= 1.3 * typical + 0.02)
-        _uncovered_part(g, smooth, major, minor, out)
+        dark = spot_kernels.colours(
+            g.pixels, table, g.cell, g.window, g.connected, g.axes, g.c, g.pred, g.base,
+            g.scale, g.index, major, minor, params.max_channel_shift_px, out.valid, out.readable,
+            out.colour, channel_at, strength)
+        _uncovered_part(g, dark, major, minor, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
 
 
-def _uncovered_part(g: _Windows, smooth: np.ndarray, major: np.ndarray, minor: np.ndarray,
+def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,
                     out: SpotMeasures) -> None:
     """
     Colour of dots partly covered by an object, from the part of them that shows.
@@ -666,7 +405,7 @@ def _uncovered_part(g: _Windows, smooth: np.ndarray, major: np.ndarray, minor: n
         inner = cell & (e <= max((b - 1.5) / b, 0.4) ** 2)
         # Where paper should be: round the dot beyond its blur, on the card.
         ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
-        pix = smooth[j]                                       # (S, S, 3) darkness
+        pix = spot_kernels.box3(dark[j])                      # (S, S, 3) 3x3 mean darkness
         strength = pix.max(axis=2)
         if np.count_nonzero(inner) < 6:
             continue
@@ -702,21 +441,28 @@ def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: flo
     against green, the median over the dots dark in both) tell each dot's
     offset, which is taken away.
     """
-    dark = strength >= 0.6 * strength.max(axis=1, keepdims=True)        # (N, 3)
-    shift = np.zeros((3, 2))
-    for c in (0, 2):
-        both = out.valid & dark[:, c] & dark[:, 1]
-        if np.count_nonzero(both) >= 3:
-            shift[c] = np.clip(median(channel_at[both, c] - channel_at[both, 1], axis=0),
-                               -limit, limit)
-    if not np.any(shift):
-        return
-    bias = (dark[:, :, None] * shift[None]).sum(axis=1) / np.maximum(dark.sum(axis=1), 1)[:, None]
-    out.points[:] = out.points - bias
+    spot_kernels.undo_channel_shift(channel_at, strength, limit, out.valid, out.points)
 
 
-def _box3(a: np.ndarray) -> np.ndarray:
-    """3x3 mean of each (K, S, S) window (edges: the window's own pixels only)."""
-    k, s, _ = a.shape
-    flat = np.ascontiguousarray(a.reshape(k * s, s), dtype=np.float32)
-    return cv2.blur(flat, (3, 3), borderType=cv2.BORDER_REPLICATE).reshape(k, s, s)
+def _load_kernels() -> None:
+    """
+    Measure two spots of a small blank image once, so that the kernels are ready.
+
+    numba compiles each kernel at its first call (or loads it from its cache
+    beside the module: a few tenths of a second); done here, at import, a
+    node's first frame is measured as fast as the others (a replayed bag's
+    first images are not dropped; the head tracks the first card at once).
+    """
+    from .dots import segment
+    image = np.full((48, 48, 3), 200, dtype=np.uint8)
+    dot_image = segment(image, DetectorParams(field='frame'))
+    layout = plane_layout(np.array([[-0.01, 0.0], [0.01, 0.0]]), np.full(2, 0.004), 0.02)
+    H = np.array([[400.0, 0.0, 24.0], [0.0, -400.0, 24.0], [0.0, 0.0, 1.0]])
+    measure_spots(dot_image, None, H, layout, np.arange(2), Paper(np.full(3, 200.0), 1.0, 1.0))
+    # The two only a dot partly covered by an object needs.
+    spot_kernels.box3(np.zeros((1, 1, 3), dtype=np.float32))
+    spot_kernels.ellipse(np.zeros((1, 2, 2), dtype=np.float32), np.zeros((1, 2)),
+                         np.ones((1, 2)), 1)
+
+
+_load_kernels()

@@ -1,0 +1,851 @@
+"""
+Compiled per-pixel passes of the sub-pixel centres (:mod:`.centres`).
+
+The centres stage measures a card's 17 dots in windows of some 25 x 25
+pixels. As numpy calls over all of a card's windows at once, its time was
+the fixed cost of a few hundred small calls per card, not the pixels; here
+each pass over a group of windows is one call that loops over the windows,
+then their pixels. What is measured, and why, is :mod:`.centres`'s
+documentation; these kernels only do its arithmetic.
+
+The per-pixel quantities are computed in float32 in the same order as the
+numpy code they replace (so that a pixel on an ellipse's edge or a
+threshold falls on the same side), the sums over a window in float64.
+
+The kernels keep the GIL (``nogil=False``): each lasts a fraction of a
+millisecond, and one that lets it go must get it back from the node's
+other threads (the executor taking images and joint states), up to the
+interpreter's switch interval (5 ms) each time, a dozen times a frame: in
+the closed-loop demo under load that cost a third of the locations.
+
+numba checks no bounds: every index computed here is tested against the
+window's size or clipped to the image's shape before use. The caller
+validates the geometry (finite, windows no bigger than a quarter of the
+image) before calling.
+"""
+
+import numba
+import numpy as np
+
+_F32 = np.float32
+
+
+@numba.njit(cache=True, nogil=False)
+def _ellipse_origin(axes, k, c0, c1):
+    """Window point (c0, c1) along window ``k``'s ellipse axes, float32 (as the numpy code)."""
+    ca = _F32(np.float64(axes[k, 0, 0]) * c0 + np.float64(axes[k, 1, 0]) * c1)
+    cb = _F32(np.float64(axes[k, 0, 1]) * c0 + np.float64(axes[k, 1, 1]) * c1)
+    return ca, cb
+
+
+@numba.njit(cache=True, nogil=False)
+def _inverse_squares(s0, s1):
+    """1 / semi-axis^2 along both axes, float32."""
+    return _F32(1.0 / (s0 * s0)), _F32(1.0 / (s1 * s1))
+
+
+@numba.njit(cache=True, nogil=False)
+def _ellipse_at(axes, k, x, y, ca, cb, sa, sb):
+    """Normalised squared radius (1 on the edge) of pixel (x, y) of window ``k``."""
+    xf, yf = _F32(x), _F32(y)
+    a = axes[k, 0, 0] * xf + axes[k, 1, 0] * yf - ca
+    b = axes[k, 0, 1] * xf + axes[k, 1, 1] * yf - cb
+    return a * a * sa + b * b * sb
+
+
+@numba.njit(cache=True, nogil=False)
+def _span(axes, k, c0, c1, s0, s1, size):
+    """
+    Pixel ranges (x from, x to, y from, y to; ends excluded) holding an ellipse.
+
+    The ellipse of semi-axes (s0, s1) along window ``k``'s axes round (c0,
+    c1), with a pixel to spare (the float32 radius is tested on each pixel
+    of the span as on every pixel of the window): loops over it instead of
+    the whole window.
+    """
+    ex = np.sqrt((s0 * axes[k, 0, 0]) ** 2 + (s1 * axes[k, 0, 1]) ** 2) + 1.0
+    ey = np.sqrt((s0 * axes[k, 1, 0]) ** 2 + (s1 * axes[k, 1, 1]) ** 2) + 1.0
+    return (_start(c0 - ex, size), _stop(c0 + ex, size),
+            _start(c1 - ey, size), _stop(c1 + ey, size))
+
+
+@numba.njit(cache=True, nogil=False)
+def _start(v, size):
+    """First index of a range from ``v`` (at least 0; all of it if ``v`` is NaN)."""
+    if not v > 0.0:
+        return 0
+    return size if v >= size else int(v)
+
+
+@numba.njit(cache=True, nogil=False)
+def _stop(v, size):
+    """End (excluded) of a range up to ``v`` (at most ``size``; all of it if ``v`` is NaN)."""
+    if not v < size - 1.0:
+        return size
+    return 0 if v < -1.0 else int(v) + 2
+
+
+@numba.njit(cache=True, nogil=False)
+def ellipse(axes, c, semi, size):
+    """
+    Normalised squared radius (K, S, S) of every pixel of every window.
+
+    ``axes`` (K, 2, 2) float32: each window's ellipse axes as columns;
+    ``c`` (K, 2): centres (window coordinates); ``semi`` (K, 2): semi-axes.
+    """
+    k_count = axes.shape[0]
+    out = np.empty((k_count, size, size), dtype=np.float32)
+    for k in range(k_count):
+        ca, cb = _ellipse_origin(axes, k, c[k, 0], c[k, 1])
+        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
+        for y in range(size):
+            for x in range(size):
+                out[k, y, x] = _ellipse_at(axes, k, x, y, ca, cb, sa, sb)
+    return out
+
+
+@numba.njit(cache=True, nogil=False)
+def _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0):
+    """Card-plane position (float32) of pixel (x, y); window point (ax0, ay0) is (qx0, qy0)."""
+    dx = _F32(x) - ax0
+    dy = _F32(y) - ay0
+    qx = qx0 + to_plane[k, 0, 0] * dx + to_plane[k, 0, 1] * dy
+    qy = qy0 + to_plane[k, 1, 0] * dx + to_plane[k, 1, 1] * dy
+    return qx, qy
+
+
+@numba.njit(cache=True, nogil=False)
+def _owned(owner, spot, qx, qy, half, resolution):
+    """Whether card-plane point (qx, qy) lies in the raster cell of layout spot ``spot``."""
+    n = owner.shape[0]
+    col = (qx + half) / resolution
+    row = (half - qy) / resolution
+    # The numpy code truncated towards zero: inside when -1 < value < n.
+    # (NaN compares false: outside.) Only then is the value an index.
+    if not (col > -1.0 and col < n and row > -1.0 and row < n):
+        return False
+    return owner[int(row), int(col)] == spot
+
+
+@numba.njit(cache=True, nogil=False)
+def spot_shapes(L, radii, margin, predicted, largest):
+    """
+    Each spot's image ellipse from the local linear map ``L`` (N, 2, 2, pixels per metre).
+
+    The singular value decomposition of each 2x2 map in closed form (J.
+    Blinn's): its left singular vectors are the ellipse's axes (major
+    first), its singular values times the spot's radius its semi-axes. The
+    window's semi-axes are 1.2 times those plus ``margin``. Returns the
+    axes (N, 2, 2, as columns), major, minor, the windows' semi-axes (N, 2),
+    the inverse maps (metres per pixel), and whether all is fit to measure:
+    every window finite and no bigger than ``largest``, every map of full
+    rank and every prediction finite (else the inverses are not computed).
+    """
+    n = L.shape[0]
+    axes = np.empty((n, 2, 2))
+    major = np.empty(n)
+    minor = np.empty(n)
+    semi = np.empty((n, 2))
+    inverse = np.empty((n, 2, 2))
+    fit = True
+    for i in range(n):
+        a, b, c, d = L[i, 0, 0], L[i, 0, 1], L[i, 1, 0], L[i, 1, 1]
+        e, f, g, h = 0.5 * (a + d), 0.5 * (a - d), 0.5 * (c + b), 0.5 * (c - b)
+        q, r = np.hypot(e, h), np.hypot(f, g)
+        turn = 0.5 * (np.arctan2(h, e) + np.arctan2(g, f))
+        cos, sin = np.cos(turn), np.sin(turn)
+        axes[i, 0, 0], axes[i, 1, 0] = cos, sin
+        axes[i, 0, 1], axes[i, 1, 1] = -sin, cos
+        major[i] = (q + r) * radii[i]
+        minor[i] = abs(q - r) * radii[i]
+        semi[i, 0] = 1.2 * major[i] + margin
+        semi[i, 1] = 1.2 * minor[i] + margin
+        fit = fit and abs(q - r) > 0.0 and np.isfinite(semi[i, 0]) and np.isfinite(semi[i, 1]) \
+            and semi[i, 0] <= largest and semi[i, 1] <= largest \
+            and np.isfinite(predicted[i, 0]) and np.isfinite(predicted[i, 1])
+    if fit:
+        for i in range(n):
+            a, b, c, d = L[i, 0, 0], L[i, 0, 1], L[i, 1, 0], L[i, 1, 1]
+            det = a * d - b * c
+            inverse[i, 0, 0], inverse[i, 0, 1] = d / det, -b / det
+            inverse[i, 1, 0], inverse[i, 1, 1] = -c / det, a / det
+    return axes, major, minor, semi, inverse, fit
+
+
+@numba.njit(cache=True, nogil=False)
+def windows(index, scale, predicted, axes, semi, inverse):
+    """
+    Lay out the windows of spots ``index`` on the image decimated by ``scale`` (1: the image).
+
+    One size for all, from the largest semi-axis plus two pixels. Returns
+    each window's origin (K, 2, integer source pixels), the size, the
+    axes (float32), the predicted centre and the semi-axes in window
+    coordinates, and the metres per source pixel (float32).
+    """
+    k_count = len(index)
+    off = (scale - 1) / 2.0
+    widest = 0.0
+    for k in range(k_count):
+        widest = max(widest, semi[index[k], 0] / scale)
+    half = int(np.ceil(widest)) + 2
+    base = np.empty((k_count, 2), dtype=np.int64)
+    pred = np.empty((k_count, 2))
+    window_semi = np.empty((k_count, 2))
+    window_axes = np.empty((k_count, 2, 2), dtype=np.float32)
+    to_plane = np.empty((k_count, 2, 2), dtype=np.float32)
+    for k in range(k_count):
+        i = index[k]
+        for a in range(2):
+            centre = (predicted[i, a] - off) / scale
+            # Halves to even, as numpy's round; a window a billion pixels
+            # away is as far off the image as any (and an integer).
+            base[k, a] = int(min(max(np.rint(centre), -1e9), 1e9)) - half
+            pred[k, a] = centre - base[k, a]
+            window_semi[k, a] = semi[i, a] / scale
+            for b in range(2):
+                window_axes[k, a, b] = axes[i, a, b]
+                to_plane[k, a, b] = inverse[i, a, b] * scale
+    return base, 2 * half + 1, window_axes, pred, window_semi, to_plane
+
+
+@numba.njit(cache=True, nogil=False)
+def _white_at(table, step, u, v):
+    """Bilinear look-up of the white grid at image point (u, v), as ``DotImage.white_at``."""
+    rows, cols = table.shape
+    gx = min(max((u + 0.5) / step - 0.5, 0.0), cols - 1.0)
+    gy = min(max((v + 0.5) / step - 0.5, 0.0), rows - 1.0)
+    x0 = min(int(gx), cols - 2) if cols > 1 else 0
+    y0 = min(int(gy), rows - 2) if rows > 1 else 0
+    fx = min(max(gx - x0, 0.0), 1.0)
+    fy = min(max(gy - y0, 0.0), 1.0)
+    x1 = min(x0 + 1, cols - 1)
+    y1 = min(y0 + 1, rows - 1)
+    return _F32((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
+                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+
+
+@numba.njit(cache=True, nogil=False)
+def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
+               owner, half, resolution, major, minor, linv, predicted, white, grid_step, quiet,
+               core_margin, min_darkness, points, valid, peak, area, inside):
+    """
+    Gather each window's pixels, take the first, generous centroid and test the dots.
+
+    ``source`` (h, w, C) uint8 is the image or the image decimated by
+    ``scale`` (C = 3, or 1 for grey); window ``k`` covers its pixels
+    ``base[k] .. base[k] + size - 1`` (x, y), clipped to the image. Window
+    ``k`` is spot ``index[k]``: ``pred`` its predicted centre (window
+    coordinates), ``semi`` the window's semi-axes along ``axes``,
+    ``to_plane`` metres per source pixel; ``spots``, ``plane_xy``,
+    ``major``, ``minor`` (image pixels) and ``linv`` (metres per image
+    pixel) are per spot, ``spots`` indexing the layout's ``owner`` raster
+    (``half``, ``resolution``: its geometry). ``white`` is the image's
+    local white on a grid (``grid_step`` pixels a cell), read at the
+    spots' ``predicted`` centres (image pixels); ``quiet`` is the source's
+    noise.
+
+    Writes the centre (image pixels), the tests, the peak darkness and the
+    area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
+    ``index``; returns pixels, in_image, raw (darkness below the floor, 0
+    off the image), weight (raw in the spot's cell), cell, window, on_card
+    (on the card or within the spot's own ellipse), centres (K, 2, window
+    coordinates), top (the peak 3x3 mean darkness round the prediction)
+    and spread (K, 3: xx, xy, yy second moments, image pixels^2).
+    """
+    k_count = base.shape[0]
+    h, w, channels = source.shape
+    shape = (k_count, size, size)
+    pixels = np.empty((k_count, size, size, channels), dtype=np.uint8)
+    in_image = np.empty(shape, dtype=np.bool_)
+    raw = np.empty(shape, dtype=np.float32)
+    weight = np.empty(shape, dtype=np.float32)
+    cell = np.empty(shape, dtype=np.bool_)
+    window = np.zeros(shape, dtype=np.bool_)
+    on_card = np.empty(shape, dtype=np.bool_)
+    centres = np.empty((k_count, 2))
+    top = np.zeros(k_count, dtype=np.float32)
+    spread = np.empty((k_count, 3))
+    half32, resolution32 = _F32(half), _F32(resolution)
+    off = (scale - 1) / 2.0
+    for k in range(k_count):
+        i = index[k]
+        bx, by = base[k, 0], base[k, 1]
+        # Darkness below the local white, less a floor that keeps paper
+        # noise out.
+        level = _white_at(white, grid_step, predicted[i, 0], predicted[i, 1])
+        floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
+        clear = level - floor
+        ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
+        qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
+        # On the card, inside its edge by two image pixels...
+        room_x = _F32(half - 2.0 * np.hypot(linv[i, 0, 0], linv[i, 0, 1]))
+        room_y = _F32(half - 2.0 * np.hypot(linv[i, 1, 0], linv[i, 1, 1]))
+        # ...or within the spot's own ellipse grown by a pixel and a half.
+        ca, cb = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
+        oa, ob = _inverse_squares(major[i] / scale + 1.5, minor[i] / scale + 1.5)
+        for y in range(size):
+            v = by + y
+            vc = min(max(v, 0), h - 1)
+            for x in range(size):
+                u = bx + x
+                uc = min(max(u, 0), w - 1)
+                darkest = np.uint8(255)
+                for ch in range(channels):
+                    p = source[vc, uc, ch]
+                    pixels[k, y, x, ch] = p
+                    darkest = min(darkest, p)
+                seen = u >= 0 and u < w and v >= 0 and v < h
+                in_image[k, y, x] = seen
+                r = max(clear - _F32(darkest), _F32(0.0))
+                raw[k, y, x] = r if seen else _F32(0.0)
+                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+                mine = _owned(owner, spots[i], qx, qy, half32, resolution32)
+                card = (abs(qx) < room_x and abs(qy) < room_y) \
+                    or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0
+                on_card[k, y, x] = card
+                cell[k, y, x] = seen and mine and card
+                weight[k, y, x] = r if seen and mine and card else _F32(0.0)
+        # The centroid twice, in the window round the latest centre.
+        c0, c1 = pred[k, 0], pred[k, 1]
+        for _ in range(2):
+            c0, c1 = _centroid(weight[k], axes, k, c0, c1, semi[k, 0], semi[k, 1])
+        centres[k, 0], centres[k, 1] = c0, c1
+        # Peak: the largest 3x3 mean within the core round the prediction.
+        reach = major[i] / scale + core_margin / scale
+        core = min(reach * reach / (semi[k, 0] * semi[k, 0]), 1.0)
+        sa, sb = _inverse_squares(semi[k, 0], semi[k, 1])
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], np.sqrt(core) * semi[k, 0],
+                               np.sqrt(core) * semi[k, 1], size)
+        best = _F32(0.0)
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= core:
+                    best = max(best, _box3_at(weight[k], x, y))
+        top[k] = best
+        rim_sum, rim_count, mass, out = 0.0, 0, 0.0, False
+        sxx, sxy, syy = 0.0, 0.0, 0.0
+        fc0, fc1 = _F32(c0), _F32(c1)
+        ea, eb = _ellipse_origin(axes, k, c0, c1)
+        x0, x1, y0, y1 = _span(axes, k, c0, c1, semi[k, 0], semi[k, 1], size)
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                e = _ellipse_at(axes, k, x, y, ea, eb, sa, sb)
+                if not e <= 1.0:
+                    continue
+                window[k, y, x] = True
+                out = out or not in_image[k, y, x]
+                wd = weight[k, y, x]
+                mass += wd
+                if e > _F32(0.6) and cell[k, y, x]:
+                    rim_sum += wd
+                    rim_count += 1
+                dx = _F32(x) - fc0
+                dy = _F32(y) - fc1
+                sxx += wd * dx * dx
+                sxy += wd * dx * dy
+                syy += wd * dy * dy
+        # The tests of a dot: dark enough against the paper and its noise,
+        # its darkness inside the window (paper round it), not much bigger
+        # than a dot, and the window inside the image (a spot cut by the
+        # border has a false centre).
+        equivalent = mass / max(np.float64(best), np.float64(_F32(1e-6))) * scale * scale
+        relative = best / max(level, _F32(1.0))
+        dark_enough = relative >= _F32(min_darkness) and best >= _F32(4.0) * quiet
+        isolated = rim_sum / max(rim_count, 1) <= _F32(0.3) * best
+        sized = equivalent <= 3.0 * (np.pi * major[i] * minor[i]) + 8.0 * (major[i] + 1.0)
+        inside[i] = not out
+        valid[i] = not out and dark_enough and isolated and sized
+        points[i, 0], points[i, 1] = (c0 + bx) * scale + off, (c1 + by) * scale + off
+        peak[i] = relative
+        area[i] = equivalent
+        total = max(mass, 1e-6)
+        spread[k, 0] = sxx / total * (scale * scale)
+        spread[k, 1] = sxy / total * (scale * scale)
+        spread[k, 2] = syy / total * (scale * scale)
+    return pixels, in_image, raw, weight, cell, window, on_card, centres, top, spread
+
+
+@numba.njit(cache=True, nogil=False)
+def _centroid(weight, axes, k, c0, c1, s0, s1):
+    """Weighted centroid of one window's ``weight`` within the ellipse (s0, s1) about (c0, c1)."""
+    size = weight.shape[0]
+    ca, cb = _ellipse_origin(axes, k, c0, c1)
+    sa, sb = _inverse_squares(s0, s1)
+    x0, x1, y0, y1 = _span(axes, k, c0, c1, s0, s1, size)
+    total, sx, sy = 0.0, 0.0, 0.0
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            if _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0:
+                wv = weight[y, x]
+                total += wv
+                sx += wv * x
+                sy += wv * y
+    if total > 0.0:
+        return sx / total, sy / total
+    return c0, c1
+
+
+@numba.njit(cache=True, nogil=False)
+def _box3_at(a, x, y):
+    """3x3 mean of (S, S) ``a`` at (x, y), the window's edge pixels repeated beyond it."""
+    size = a.shape[0]
+    total = 0.0
+    for dy in range(-1, 2):
+        yy = min(max(y + dy, 0), size - 1)
+        for dx in range(-1, 2):
+            xx = min(max(x + dx, 0), size - 1)
+            total += a[yy, xx]
+    # As OpenCV's box filter: a double sum times 1/9, rounded to float32.
+    return _F32(total * (1.0 / 9.0))
+
+
+@numba.njit(cache=True, nogil=False)
+def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base, scale, index,
+              major, minor, blur, sigma, to_plane, spots, plane_xy, owner, half, resolution,
+              points, predicted, valid, readable):
+    """
+    Centroid again in a tight window, the dark region joined to the dot alone; the dot tests.
+
+    ``raw``, ``on_card``, ``first_weight``, ``window``, ``top`` and
+    ``centres`` are :func:`first_pass`'s (and its other arguments as
+    there); the windows are shared about ``centres`` now. The tight window
+    is the dot and its ``blur`` (2.5 sigma, covariance in image pixels^2)
+    plus a pixel; ``sigma`` the source's pixel noise.
+
+    Writes each centre (image pixels) into ``points`` and the tests into
+    ``valid`` and ``readable`` (``predicted``: where the homography put
+    the spots); returns the centres (K, 2, window coordinates) and the
+    mask (K, S, S) of the pixels not in a dark region apart from the dot's.
+    """
+    k_count, size = raw.shape[0], raw.shape[1]
+    shape = (k_count, size, size)
+    connected = np.empty(shape, dtype=np.bool_)
+    out_c = np.empty((k_count, 2))
+    steady = np.empty(k_count, dtype=np.bool_)
+    exists = np.empty(k_count, dtype=np.bool_)
+    relative = np.empty(k_count)
+    half32, resolution32 = _F32(half), _F32(resolution)
+    mine = np.empty((size, size), dtype=np.bool_)
+    weight = np.empty((size, size), dtype=np.float32)
+    dark = np.empty((size, size), dtype=np.bool_)
+    region = np.empty((size, size), dtype=np.bool_)
+    stack = np.empty(size * size, dtype=np.int64)
+    rows = np.empty((size, size), dtype=np.float32)
+    tight = np.empty(2)
+    off = (scale - 1) / 2.0
+    for k in range(k_count):
+        i = index[k]
+        # The blur's extent (2.5 sigma) along each of the dot's axes.
+        for axis in range(2):
+            ext = 0.0
+            for r in range(2):
+                for q in range(2):
+                    ext += np.float64(axes[k, r, axis]) * blur[r, q] * np.float64(axes[k, q, axis])
+            semi_axis = major[i] if axis == 0 else minor[i]
+            tight[axis] = (semi_axis + 2.5 * np.sqrt(ext) + 1.0) / scale
+        c0, c1 = centres[k, 0], centres[k, 1]
+        ax0, ay0 = _F32(c0), _F32(c1)
+        qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
+        threshold = _F32(0.25) * max(top[k], _F32(1e-6))
+        for y in range(size):
+            for x in range(size):
+                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+                m = _owned(owner, spots[i], qx, qy, half32, resolution32)
+                mine[y, x] = m
+                wv = raw[k, y, x] if m and on_card[k, y, x] else _F32(0.0)
+                weight[y, x] = wv
+                dark[y, x] = wv > threshold
+        # Dark things apart from the dot are not the dot's: its own dark
+        # region (8-connected) is the one with the darkest pixel within a
+        # pixel and a half of the centre (the first such, row by row).
+        # (Elsewhere the weight counts as 0: the first pixel when no pixel
+        # near the centre has any.)
+        best, best_value = 0, _F32(0.0)
+        for y in range(_start(c1 - 1.5, size), _stop(c1 + 1.5, size)):
+            for x in range(_start(c0 - 1.5, size), _stop(c0 + 1.5, size)):
+                if abs(x - c0) <= 1.5 and abs(y - c1) <= 1.5 and weight[y, x] > best_value:
+                    best, best_value = y * size + x, weight[y, x]
+        for y in range(size):
+            for x in range(size):
+                connected[k, y, x] = not dark[y, x]
+        if dark[best // size, best % size]:
+            _flood(dark, connected[k], best, stack)
+        for y in range(size):
+            for x in range(size):
+                if not connected[k, y, x]:
+                    weight[y, x] = _F32(0.0)
+        for _ in range(2):
+            c0, c1 = _centroid(weight, axes, k, c0, c1, tight[0], tight[1])
+        out_c[k, 0], out_c[k, 1] = c0, c1
+        ca, cb = _ellipse_origin(axes, k, c0, c1)
+        sa, sb = _inverse_squares(tight[0], tight[1])
+        ga, gb = _inverse_squares(tight[0] + 1.0, tight[1] + 1.0)
+        threshold = _F32(0.25) * top[k]
+        n_stained, n_beyond = 0, 0
+        for y in range(size):
+            for x in range(size):
+                if window[k, y, x] and mine[y, x] \
+                        and _ellipse_at(axes, k, x, y, ca, cb, ga, gb) > 1.0:
+                    n_beyond += 1
+                    if weight[y, x] > threshold:
+                        n_stained += 1
+        region[:] = False
+        span = _span(axes, k, c0, c1, tight[0], tight[1], size)
+        for y in range(span[2], span[3]):
+            for x in range(span[0], span[1]):
+                region[y, x] = mine[y, x] and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0
+        asymmetry = _asymmetry(weight, region, span, c0, c1, sigma, rows)
+        points[i, 0] = (c0 + base[k, 0]) * scale + off
+        points[i, 1] = (c1 + base[k, 1]) * scale + off
+        steady[k] = np.hypot(points[i, 0] - predicted[i, 0], points[i, 1] - predicted[i, 1]) \
+            <= max(1.5, 0.3 * major[i] + 1.0)
+        # Reflecting a dot a pixel or two thick by interpolation blurs it:
+        # more room for thin dots. An object touching the dot joins its dark
+        # region beyond the dot and its blur.
+        grid = 0.15 / max(minor[i] / scale, 0.5)
+        touched = n_stained > 0.1 * n_beyond + 1
+        exists[k] = valid[i]
+        valid[i] = valid[i] and steady[k] and asymmetry <= 0.08 + grid and not touched
+        # The evenness of the first weight over the inner part round the
+        # prediction (ink is even there).
+        inner0 = (0.6 * major[i] + 0.7) / scale
+        inner1 = (0.6 * minor[i] + 0.7) / scale
+        ia, ib = _ellipse_origin(axes, k, pred[k, 0], pred[k, 1])
+        sa, sb = _inverse_squares(inner0, inner1)
+        x0, x1, y0, y1 = _span(axes, k, pred[k, 0], pred[k, 1], inner0, inner1, size)
+        count, total, squares = 0, 0.0, 0.0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if mine[y, x] and _ellipse_at(axes, k, x, y, ia, ib, sa, sb) <= 1.0:
+                    wv = first_weight[k, y, x]
+                    count += 1
+                    total += wv
+                    squares += wv * wv
+        count = max(count, 1)
+        mean = total / count
+        relative[k] = np.sqrt(max(squares / count - mean * mean, 0.0)) / max(mean, 1e-6)
+    # Its colour may still be read where the geometry may not (a dot
+    # touched by an object, or with one over part of its rim): when its
+    # inner part is as even as the dots' that passed everything (same blur,
+    # same size). Too small a dot to tell: not read.
+    typical = _median_where(relative, valid, index, 3)
+    for k in range(k_count):
+        i = index[k]
+        even = relative[k] <= 1.3 * typical + 0.03 and minor[i] >= 2.5
+        readable[i] = valid[i] or (exists[k] and steady[k] and even)
+    return out_c, connected
+
+
+@numba.njit(cache=True, nogil=False)
+def _median_where(values, chosen, index, least):
+    """
+    Median of ``values[k]`` where ``chosen[index[k]]``; 0 when fewer than ``least`` are.
+
+    As :func:`~.stats.median` (the middle value, or the mean of the two).
+    """
+    picked = np.empty(len(values))
+    n = 0
+    for k in range(len(values)):
+        if chosen[index[k]]:
+            picked[n] = values[k]
+            n += 1
+    if n < least or n == 0:
+        return 0.0
+    # Insertion sort: a card's few dozen values (and it compiles in a
+    # fraction of the time np.sort takes).
+    for a in range(1, n):
+        v = picked[a]
+        b = a - 1
+        while b >= 0 and picked[b] > v:
+            picked[b + 1] = picked[b]
+            b -= 1
+        picked[b + 1] = v
+    m = n // 2
+    return picked[m] if n % 2 else (picked[m - 1] + picked[m]) / 2
+
+
+@numba.njit(cache=True, nogil=False)
+def _flood(dark, keep, start, stack):
+    """Set ``keep`` over the 8-connected region of ``dark`` holding flat index ``start``."""
+    size = dark.shape[0]
+    keep[start // size, start % size] = True
+    stack[0] = start
+    depth = 1
+    while depth > 0:
+        depth -= 1
+        y, x = stack[depth] // size, stack[depth] % size
+        for yy in range(max(y - 1, 0), min(y + 2, size)):
+            for xx in range(max(x - 1, 0), min(x + 2, size)):
+                # A pixel goes on the stack once (kept first): the stack
+                # never holds more than the window's pixels.
+                if dark[yy, xx] and not keep[yy, xx]:
+                    keep[yy, xx] = True
+                    stack[depth] = yy * size + xx
+                    depth += 1
+
+
+@numba.njit(cache=True, nogil=False)
+def _asymmetry(weight, region, span, c0, c1, sigma, rows):
+    """
+    How far ``weight`` is from point-symmetric about (c0, c1), less the noise.
+
+    Each pixel of ``region`` (within ``span``, as from :func:`_span`)
+    whose reflection through (c0, c1), to the nearest pixel (halves
+    rounded up), is in ``region`` too is compared with ``weight`` reflected
+    there bilinearly (rows, then columns: the interpolation is separable;
+    0 beyond the window). Returns |w - reflected w| / (w + reflected w)
+    summed, less 1.13 ``sigma`` per pixel with weight over that sum.
+    ``rows`` is scratch (S, S) float32.
+    """
+    size = weight.shape[0]
+    x0, x1, y0, y1 = span
+    _reflect_rows(weight, c1, rows, y0, y1)
+    total, difference, count = 0.0, 0.0, 0
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            if not region[y, x]:
+                continue
+            ny = _floor_index(2.0 * c1 - y + 0.5, size)
+            nx = _floor_index(2.0 * c0 - x + 0.5, size)
+            if ny < 0 or ny >= size or nx < 0 or nx >= size or not region[ny, nx]:
+                continue
+            own = weight[y, x]
+            mirror = _reflect_column(rows, y, x, c0)
+            total += own + mirror
+            difference += abs(own - mirror)
+            if own > 0.0:
+                count += 1
+    # Sums as float32 would hold them, then as the numpy code combined them.
+    total = max(total, 1e-6)
+    noise = np.float64(_F32(1.13) * sigma) * count / total
+    return difference / total - noise
+
+
+@numba.njit(cache=True, nogil=False)
+def _reflect_rows(a, c1, rows, y0, y1):
+    """Reflect rows ``y0 .. y1 - 1`` of (S, S) ``a`` through row ``c1`` (bilinear) to ``rows``."""
+    size = a.shape[0]
+    for y in range(y0, y1):
+        pos = 2.0 * c1 - y
+        b = np.floor(pos)
+        f = _F32(pos - b)
+        i = _floor_index(pos, size)
+        for x in range(size):
+            r0 = a[i, x] if 0 <= i < size else _F32(0.0)
+            r1 = a[i + 1, x] if 0 <= i + 1 < size else _F32(0.0)
+            rows[y, x] = (_F32(1.0) - f) * r0 + f * r1
+
+
+@numba.njit(cache=True, nogil=False)
+def _reflect_column(rows, y, x, c0):
+    """Pixel (x, y) of the row-reflected ``rows`` reflected through column ``c0``, bilinear."""
+    size = rows.shape[0]
+    pos = 2.0 * c0 - x
+    b = np.floor(pos)
+    f = _F32(pos - b)
+    i = _floor_index(pos, size)
+    r0 = rows[y, i] if 0 <= i < size else _F32(0.0)
+    r1 = rows[y, i + 1] if 0 <= i + 1 < size else _F32(0.0)
+    return (_F32(1.0) - f) * r0 + f * r1
+
+
+@numba.njit(cache=True, nogil=False)
+def _floor_index(v, size):
+    """floor(v) as an index, or -2 (off the window either way) when far outside ``0 .. size``."""
+    return int(np.floor(v)) if -2.0 <= v <= size + 1.0 else -2
+
+
+@numba.njit(cache=True, nogil=False)
+def colours(pixels, table, cell, window, connected, axes, centres, pred, base, scale, index,
+            major, minor, max_shift, valid, readable, colour, channel_at, strength):
+    """
+    Per-channel darkness of each window's dot: where each channel's image is, and its peak.
+
+    ``pixels`` (K, S, S, 3) uint8 and ``table`` (256, 3) float32, each
+    level's darkness per channel; ``cell``, ``window`` and ``connected``
+    the windows' masks; the other arguments as :func:`last_pass`'s. Each
+    channel's centroid is taken over its darkness above 0.1 in the window;
+    the peak of the 3x3 mean darkness within the dot's inner part grown by
+    the largest channel shift ``max_shift`` round its centre (for a dot
+    not ``valid``: not grown, round its prediction), in its cell and not
+    apart from it. A dot ``readable`` but not valid stays readable only if
+    its darkness there is as even as the valid dots'.
+
+    Writes ``colour`` (the peaks), ``channel_at`` (each channel's centroid,
+    image pixels) and ``strength`` (its darkness's sum) at ``index``, and
+    updates ``readable``; returns the darkness (K, S, S, 3).
+    """
+    k_count, size = pixels.shape[0], pixels.shape[1]
+    dark = np.empty((k_count, size, size, 3), dtype=np.float32)
+    spread = np.empty(k_count)
+    total = np.empty(3)
+    sx = np.empty(3)
+    sy = np.empty(3)
+    mean = np.empty(3)
+    squares = np.empty(3)
+    off = (scale - 1) / 2.0
+    for k in range(k_count):
+        i = index[k]
+        total[:] = 0.0
+        sx[:] = 0.0
+        sy[:] = 0.0
+        for y in range(size):
+            for x in range(size):
+                for ch in range(3):
+                    dark[k, y, x, ch] = table[pixels[k, y, x, ch], ch]
+                if not (cell[k, y, x] and window[k, y, x] and connected[k, y, x]):
+                    continue
+                for ch in range(3):
+                    wv = max(dark[k, y, x, ch] - _F32(0.1), _F32(0.0))
+                    total[ch] += wv
+                    sx[ch] += wv * x
+                    sy[ch] += wv * y
+        for ch in range(3):
+            t = max(total[ch], 1e-6)
+            strength[i, ch] = t
+            channel_at[i, ch, 0] = (sx[ch] / t + base[k, 0]) * scale + off
+            channel_at[i, ch, 1] = (sy[ch] / t + base[k, 1]) * scale + off
+        sure = valid[i]
+        grow = max_shift if sure else 0.0
+        g0 = (0.6 * major[i] + 0.7 + grow) / scale
+        g1 = (0.6 * minor[i] + 0.7 + grow) / scale
+        a0 = centres[k, 0] if sure else pred[k, 0]
+        a1 = centres[k, 1] if sure else pred[k, 1]
+        ca, cb = _ellipse_origin(axes, k, a0, a1)
+        sa, sb = _inverse_squares(g0, g1)
+        x0, x1, y0, y1 = _span(axes, k, a0, a1, g0, g1, size)
+        count = 0
+        mean[:] = 0.0
+        squares[:] = 0.0
+        for ch in range(3):
+            colour[i, ch] = 0.0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if not (cell[k, y, x] and connected[k, y, x]) \
+                        or _ellipse_at(axes, k, x, y, ca, cb, sa, sb) > 1.0:
+                    continue
+                count += 1
+                for ch in range(3):
+                    colour[i, ch] = max(colour[i, ch], _box3_at(dark[k, :, :, ch], x, y))
+                    d = dark[k, y, x, ch]
+                    mean[ch] += d
+                    squares[ch] += d * d
+        count = max(count, 1)
+        widest = 0.0
+        for ch in range(3):
+            m = mean[ch] / count
+            widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
+        spread[k] = widest
+    # A dot read for its colour alone must be even in every channel there,
+    # as the sure dots are: not half ink, half something else.
+    typical = _median_where(spread, valid, index, 3)
+    for k in range(k_count):
+        i = index[k]
+        if readable[i] and not valid[i]:
+            readable[i] = spread[k] <= 1.3 * typical + 0.02
+    return dark
+
+
+@numba.njit(cache=True, nogil=False)
+def undo_channel_shift(channel_at, strength, limit, valid, points):
+    """
+    Move each point by its ink's channel shift (see :func:`~.centres._undo_channel_shift`).
+
+    ``channel_at`` (N, 3, 2): each channel's centroid; ``strength`` (N, 3)
+    its darkness. A channel is dark in a dot at 0.6 of its darkest
+    channel's strength. The card's shifts of red and blue against green
+    are the medians (clipped to ``limit``) over the ``valid`` dots dark in
+    both; each point moves by the mean shift of its dark channels.
+    """
+    n = strength.shape[0]
+    dark = np.empty((n, 3), dtype=np.bool_)
+    for i in range(n):
+        most = max(strength[i, 0], strength[i, 1], strength[i, 2])
+        for ch in range(3):
+            dark[i, ch] = strength[i, ch] >= 0.6 * most
+    shift = np.zeros((3, 2))
+    moved = False
+    offsets = np.empty(n)
+    everyone = np.arange(n)
+    for ch in (0, 2):
+        both = np.empty(n, dtype=np.bool_)
+        for i in range(n):
+            both[i] = valid[i] and dark[i, ch] and dark[i, 1]
+        for axis in range(2):
+            for i in range(n):
+                offsets[i] = channel_at[i, ch, axis] - channel_at[i, 1, axis]
+            median = _median_where(offsets, both, everyone, 3)
+            shift[ch, axis] = min(max(median, -limit), limit)
+            moved = moved or shift[ch, axis] != 0.0
+    if not moved:
+        return
+    for i in range(n):
+        count = max(int(dark[i, 0]) + int(dark[i, 1]) + int(dark[i, 2]), 1)
+        for axis in range(2):
+            bias = 0.0
+            for ch in range(3):
+                bias += shift[ch, axis] if dark[i, ch] else 0.0
+            points[i, axis] = points[i, axis] - bias / count
+
+
+@numba.njit(cache=True, nogil=False)
+def blur(spread, axes, major, minor, valid):
+    """
+    Estimate the image's defocus and motion as a covariance from the dots' second moments.
+
+    The covariance is 2x2, in image pixels^2.
+
+    See :func:`~.centres._blur`: the median over the ``valid`` dots of each
+    dot's ``spread`` (xx, xy, yy) less its sharp ellipse's (semi-axes
+    ``major``, ``minor`` halved, along ``axes``), its eigenvalues at least
+    0.1; 0.25 in all directions from fewer than three dots.
+    """
+    n = spread.shape[0]
+    out = np.empty((2, 2))
+    if np.sum(valid) < 3:
+        out[0, 0], out[0, 1], out[1, 0], out[1, 1] = 0.25, 0.0, 0.0, 0.25
+        return out
+    excess = np.empty((3, n))
+    for i in range(n):
+        c, s = axes[i, 0, 0], axes[i, 1, 0]                 # major axis direction
+        a2, b2 = major[i] ** 2 / 4, minor[i] ** 2 / 4
+        excess[0, i] = spread[i, 0] - (a2 * c * c + b2 * s * s)
+        excess[1, i] = spread[i, 1] - (a2 - b2) * c * s
+        excess[2, i] = spread[i, 2] - (a2 * s * s + b2 * c * c)
+    everyone = np.arange(n)
+    xx = _median_where(excess[0], valid, everyone, 1)
+    xy = _median_where(excess[1], valid, everyone, 1)
+    yy = _median_where(excess[2], valid, everyone, 1)
+    # Eigenvalues of the symmetric 2x2, the smaller raised to 0.1.
+    middle = 0.5 * (xx + yy)
+    radius = np.hypot(0.5 * (xx - yy), xy)
+    low, high = middle - radius, middle + radius
+    if low >= 0.1:
+        out[0, 0], out[0, 1], out[1, 0], out[1, 1] = xx, xy, xy, yy
+        return out
+    # Unit eigenvector of the larger eigenvalue.
+    if radius == 0.0:
+        vx, vy = 1.0, 0.0
+    elif xx >= yy:
+        vx, vy = high - yy, xy
+    else:
+        vx, vy = xy, high - xx
+    norm = np.hypot(vx, vy)
+    vx, vy = vx / norm, vy / norm
+    high, low = max(high, 0.1), 0.1
+    out[0, 0] = high * vx * vx + low * vy * vy
+    out[0, 1] = out[1, 0] = (high - low) * vx * vy
+    out[1, 1] = high * vy * vy + low * vx * vx
+    return out
+
+
+@numba.njit(cache=True, nogil=False)
+def box3(a):
+    """3x3 mean of each channel of one (S, S, C) float32 window, its edge pixels repeated."""
+    size, channels = a.shape[0], a.shape[2]
+    out = np.empty_like(a)
+    for ch in range(channels):
+        for y in range(size):
+            for x in range(size):
+                out[y, x, ch] = _box3_at(a[:, :, ch], x, y)
+    return out

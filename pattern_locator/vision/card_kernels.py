@@ -343,3 +343,160 @@ def homography_residuals(H, obj, img, radii, max_error, min_tolerance):
         # NaN stays NaN (as numpy's maximum): such a point is no inlier.
         tol[i] = t if (t != t or t > min_tolerance) else min_tolerance
     return err, tol
+
+
+@numba.njit(cache=True, nogil=True)
+def _median_sorted(s):
+    """Median of sorted values (the middle one, or the mean of the two middle ones)."""
+    m = s.shape[0] // 2
+    return s[m] if s.shape[0] % 2 else (s[m - 1] + s[m]) / 2
+
+
+@numba.njit(cache=True, nogil=True)
+def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, cell):
+    """
+    Blobs that could be a card's centre and their evidence: (idx, evidence, reach).
+
+    For every blob of at least ``min_area``, the blobs between 0.06 and 1
+    times its area within ``reach`` of it (a square, on a grid of ``cell``
+    pixels), counted with summed area tables, one per octave of blob area;
+    those with at least ``min_neighbours``, in blob order. ``reach`` (per
+    blob) is 1.5 times the outer ring's radius for a centre of the blob's
+    extent, plus 2 pixels.
+    """
+    n = u.shape[0]
+    reach = np.empty(n)
+    gx = np.empty(n, dtype=np.intp)
+    gy = np.empty(n, dtype=np.intp)
+    octave = np.empty(n, dtype=np.intp)
+    gw = gh = 1
+    first, last = 0, 0
+    for j in range(n):
+        if not (abs(u[j]) < 1e7 and abs(v[j]) < 1e7 and area[j] >= 0.0):
+            raise ValueError('blobs: centres and areas must be finite')
+        half = 0.5 * scale * float(max(box[j, 2], box[j, 3]))
+        reach[j] = 1.5 * rho_out * max(half, math.sqrt(area[j] / math.pi)) + 2.0
+        gx[j] = int(max(u[j], 0.0)) // cell
+        gy[j] = int(max(v[j], 0.0)) // cell
+        octave[j] = int(math.floor(math.log2(max(area[j], 1.0))))
+        gw, gh = max(gw, gx[j] + 1), max(gh, gy[j] + 1)
+        if j == 0 or octave[j] < first:
+            first = octave[j]
+        if j == 0 or octave[j] > last:
+            last = octave[j]
+    levels = last - first + 1
+    # table[k, y, x]: blobs of octave <= first + k - 1 in cells [0, y) x [0, x).
+    table = np.zeros((levels + 1, gh + 1, gw + 1), dtype=np.int32)
+    for j in range(n):
+        table[min(max(octave[j] - first, 0), levels - 1) + 1,
+              min(max(gy[j], 0), gh - 1) + 1, min(max(gx[j], 0), gw - 1) + 1] += 1
+    for k in range(1, levels + 1):
+        for y in range(1, gh + 1):
+            for x in range(1, gw + 1):
+                table[k, y, x] += table[k - 1, y, x] + table[k, y - 1, x] + table[k, y, x - 1] \
+                    - table[k - 1, y - 1, x] - table[k - 1, y, x - 1] - table[k, y - 1, x - 1] \
+                    + table[k - 1, y - 1, x - 1]
+    idx = np.empty(n, dtype=np.intp)
+    evidence = np.empty(n, dtype=np.intp)
+    m = 0
+    for j in range(n):
+        if not area[j] >= min_area:
+            continue
+        lo = min(max(int(math.floor(math.log2(0.06 * area[j]))) - first, 0), levels)
+        hi = min(max(octave[j] - first + 1, 0), levels)
+        x0 = min(max(int((u[j] - reach[j]) // cell), 0), gw)
+        x1 = min(max(int((u[j] + reach[j]) // cell) + 1, 0), gw)
+        y0 = min(max(int((v[j] - reach[j]) // cell), 0), gh)
+        y1 = min(max(int((v[j] + reach[j]) // cell) + 1, 0), gh)
+        count = (table[hi, y1, x1] - table[hi, y0, x1] - table[hi, y1, x0] + table[hi, y0, x0]) \
+            - (table[lo, y1, x1] - table[lo, y0, x1] - table[lo, y1, x0] + table[lo, y0, x0]) \
+            - 1         # the blob itself
+        if count >= min_neighbours:
+            idx[m] = j
+            evidence[m] = count
+            m += 1
+    return idx[:m], evidence[:m], reach
+
+
+@numba.njit(cache=True, nogil=True)
+def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
+    """
+    How much the blobs round each candidate ``idx`` look like a card's rings.
+
+    The neighbours within ``reach`` (found through the blobs sorted by
+    column, so each candidate costs the blobs in its own reach) of a ring
+    dot's size (0.12 to 0.9 times the centre's area) that are of one size
+    (within a factor 1.6 of their median): their number (at most ``most``)
+    plus twice the octants round the centre they cover; 0 with fewer than
+    ``min_neighbours`` neighbours.
+    """
+    n = u.shape[0]
+    order = np.argsort(u, kind='mergesort')
+    su = u[order]
+    score = np.zeros(idx.shape[0])
+    near = np.empty(n, dtype=np.intp)
+    for i in range(idx.shape[0]):
+        ci = idx[i]
+        if ci < 0 or ci >= n:
+            continue
+        r = reach[ci]
+        lo = np.searchsorted(su, u[ci] - r)
+        hi = np.searchsorted(su, u[ci] + r)
+        m = 0
+        for s in range(lo, hi):
+            j = order[s]
+            ratio = area[j] / area[ci]
+            if abs(v[j] - v[ci]) < r and ratio > 0.12 and ratio < 0.9:
+                near[m] = j
+                m += 1
+        if m < min_neighbours:
+            continue
+        a = np.empty(m)
+        for k in range(m):
+            a[k] = area[near[k]]
+        typical = _median_sorted(np.sort(a))
+        octants = np.zeros(8, dtype=np.bool_)
+        alike = 0
+        for k in range(m):
+            j = near[k]
+            if area[j] > typical / 1.6 and area[j] < typical * 1.6:
+                alike += 1
+                t = math.atan2(v[j] - v[ci], u[j] - u[ci])
+                octants[int(math.floor((t + math.pi) / (math.pi / 4))) % 8] = True
+        score[i] = min(alike, most) + 2 * np.count_nonzero(octants)
+    return score
+
+
+@numba.njit(cache=True, nogil=True)
+def ring_of_spots(spots, radius, reach, min_spots):
+    """
+    Whether faint spots (offsets (N, 2) from a small centre) look like its rings.
+
+    The spots between 1.5 centre radii and ``reach``: at least ``min_spots``
+    of them, in at least five of the eight directions, their mean near
+    the centre (within 0.4 times their median distance). Returns
+    ``(ring-like, number of ring spots)``.
+    """
+    n = spots.shape[0]
+    rho = np.empty(n)
+    keep = np.empty(n, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        r = math.hypot(spots[i, 0], spots[i, 1])
+        if r > 1.5 * radius and r < reach:
+            rho[m] = r
+            keep[m] = i
+            m += 1
+    if m < min_spots:
+        return False, m
+    octants = np.zeros(8, dtype=np.bool_)
+    sx = sy = 0.0
+    for k in range(m):
+        x, y = spots[keep[k], 0], spots[keep[k], 1]
+        octants[int((math.atan2(y, x) + math.pi) * (8 / (2 * math.pi))) % 8] = True
+        sx += x
+        sy += y
+    if np.count_nonzero(octants) < 5:
+        return False, m
+    typical = _median_sorted(np.sort(rho[:m]))
+    return not math.hypot(sx / m, sy / m) > 0.4 * typical, m

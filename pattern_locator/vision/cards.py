@@ -28,7 +28,6 @@ from . import card_kernels
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
-from .stats import median
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.
@@ -71,41 +70,13 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
     shortlist is ranked by how ring-like its neighbours are.
     """
     n = len(blobs)
-    if n < 1 + MIN_NEIGHBOURS:
+    if n < 1 + MIN_NEIGHBOURS or not np.any(blobs.area >= MIN_CENTRE_AREA):
         return np.zeros(0, dtype=np.intp)
-    area = blobs.area
-    half = 0.5 * blobs.scale * np.maximum(blobs.box[:, 2], blobs.box[:, 3]).astype(float)
-    centre_like = area >= MIN_CENTRE_AREA
-    if not np.any(centre_like):
-        return np.zeros(0, dtype=np.intp)
+    u, v, area = _f64(blobs.u), _f64(blobs.v), _f64(blobs.area)
     rho_out = config.ring_radii[0] / config.centre_dot_radius
-    reach = 1.5 * rho_out * np.maximum(half, np.sqrt(area / np.pi)) + 2.0
-    gx = np.maximum(blobs.u, 0.0).astype(np.intp) // _CELL
-    gy = np.maximum(blobs.v, 0.0).astype(np.intp) // _CELL
-    gw, gh = int(gx.max()) + 1, int(gy.max()) + 1
-    octave = np.floor(np.log2(np.maximum(area, 1.0))).astype(np.intp)
-    first = int(octave.min())
-    levels = int(octave.max()) - first + 1
-    counts = np.bincount(((octave - first) * gh + gy) * gw + gx,
-                         minlength=levels * gh * gw).reshape(levels, gh, gw)
-    # table[k, y, x]: blobs of octave <= first + k - 1 in cells [0, y) x [0, x).
-    table = np.zeros((levels + 1, gh + 1, gw + 1), dtype=np.int32)
-    table[1:, 1:, 1:] = counts.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)
-    idx = np.flatnonzero(centre_like)
-    lo = np.clip(np.floor(np.log2(0.06 * area[idx])).astype(np.intp) - first, 0, levels)
-    hi = np.clip(octave[idx] - first + 1, 0, levels)
-    x0 = np.clip(((blobs.u[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gw)
-    x1 = np.clip(((blobs.u[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gw)
-    y0 = np.clip(((blobs.v[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gh)
-    y1 = np.clip(((blobs.v[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gh)
-
-    def box(level):
-        return (table[level, y1, x1] - table[level, y0, x1] - table[level, y1, x0]
-                + table[level, y0, x0])
-
-    evidence = box(hi) - box(lo) - 1
-    strong = evidence >= MIN_NEIGHBOURS
-    idx, evidence = idx[strong], evidence[strong]
+    idx, evidence, reach = card_kernels.centre_evidence(
+        u, v, area, _i32(blobs.box), float(blobs.scale), float(rho_out), MIN_CENTRE_AREA,
+        MIN_NEIGHBOURS, _CELL)
     # A card's two rings and its marks make 18 neighbours: more say a crowd
     # (texture, foliage), not more card. Among the crowded, the quietest
     # surroundings first: a card's paper is smooth.
@@ -116,7 +87,8 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
         return idx
     # Many blobs crowd the shortlist (a textured floor, foliage): a card's
     # ring dots are alike in size and all round their centre.
-    score = _ring_evidence(blobs, idx, reach)
+    score = card_kernels.ring_evidence(u, v, area, idx, reach, MIN_NEIGHBOURS,
+                                       2 * RING_POINTS + 2)
     quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
     return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
 
@@ -167,54 +139,15 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
         # directions, their mean near the centre.
         if own > 6.0 * blobs.area[ci]:
             continue
-        rho = np.hypot(spots[:, 0], spots[:, 1])
-        inside = (rho > 1.5 * radius) & (rho < reach)
-        ring, rho = spots[inside], rho[inside]
-        if len(ring) < MIN_NEIGHBOURS:
-            continue
-        octant = (np.arctan2(ring[:, 1], ring[:, 0]) + np.pi) * (RING_POINTS / (2 * np.pi))
-        if np.count_nonzero(np.bincount(octant.astype(np.intp) % RING_POINTS)) < 5:
-            continue
-        if math.hypot(*ring.mean(axis=0)) > 0.4 * float(median(rho)):
+        ring_like, n_ring = card_kernels.ring_of_spots(_f64(spots), radius, reach,
+                                                       MIN_NEIGHBOURS)
+        if not ring_like:
             continue
         # Darkest first; a crowd of faint spots (more than a card's two
         # rings and marks, and some) says texture: last.
-        found.append((len(ring) > 3 * RING_POINTS, int(ci)))
+        found.append((n_ring > 3 * RING_POINTS, int(ci)))
     return np.array([ci for _, ci in sorted(found, key=lambda f: f[0])[:_FAR_EXTRA]],
                     dtype=np.intp)
-
-
-def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """
-    How much the blobs round each candidate look like a card's rings.
-
-    The neighbours within reach (found through the blobs sorted by column,
-    so each candidate costs the blobs in its own reach) of a ring dot's size
-    (a third of the centre's, give or take perspective and blur) that are of
-    one size (within a factor 1.6 of their median), and the octants they
-    cover.
-    """
-    order = np.argsort(blobs.u, kind='stable')
-    su = blobs.u[order]
-    score = np.zeros(len(idx))
-    for i, ci in enumerate(idx):
-        r = reach[ci]
-        lo, hi = np.searchsorted(su, [blobs.u[ci] - r, blobs.u[ci] + r])
-        near = order[lo:hi]
-        dv = blobs.v[near] - blobs.v[ci]
-        ratio = blobs.area[near] / blobs.area[ci]
-        keep = (np.abs(dv) < r) & (ratio > 0.12) & (ratio < 0.9)
-        near, dv = near[keep], dv[keep]
-        if len(near) < MIN_NEIGHBOURS:
-            continue
-        a = blobs.area[near]
-        typical = median(a)
-        alike = (a > typical / 1.6) & (a < typical * 1.6)
-        du = blobs.u[near[alike]] - blobs.u[ci]
-        octant = (np.floor((np.arctan2(dv[alike], du) + np.pi) / (np.pi / 4)).astype(int)) % 8
-        octants = np.count_nonzero(np.bincount(octant, minlength=8))
-        score[i] = min(np.count_nonzero(alike), 2 * RING_POINTS + 2) + 2 * octants
-    return score
 
 
 def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,

@@ -23,17 +23,22 @@ import numpy as np
 
 from ..card.pattern import RING_POINTS
 
+# Compiled once per installation (cached beside the module), free of the GIL,
+# and with numpy's arithmetic: a division by zero gives inf or NaN as in the
+# numpy code these kernels replace, not Python's ZeroDivisionError.
+_kernel = numba.njit(cache=True, nogil=True, error_model='numpy')
+
 _SLOT_ANGLE = math.pi / 4          # 45 degrees between ring slots
 _TWO_PI = 2 * math.pi
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _wrap(a):
     """Angle wrapped to [-pi, pi) (``%`` as Python's and numpy's: the divisor's sign)."""
     return (a + math.pi) % _TWO_PI - math.pi
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _eig2(a, b, c):
     """
     Eigenvalues (ascending) of [[a, b], [b, c]] and the unit eigenvector of the larger.
@@ -63,7 +68,7 @@ def _eig2(a, b, c):
     return small, big, ex, ey
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _matrix_function(f_small, f_big, ex, ey):
     """Symmetric 2x2 map with eigenvalues f_small, f_big; (ex, ey) the f_big direction."""
     out = np.empty((2, 2))
@@ -75,7 +80,7 @@ def _matrix_function(f_small, f_big, ex, ey):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def blob_covariance(labels, box, label, scale):
     """
     Second central moments (image pixels^2) of one component: (xx, xy, yy).
@@ -111,7 +116,7 @@ def blob_covariance(labels, box, label, scale):
     return s2 * (mu20 / a + 1 / 12), s2 * (mu11 / a), s2 * (mu02 / a + 1 / 12)
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _vote_slots(rho, ang, ring_rho):
     """
     Scale of the rings and angle of slot 0 by voting; (found, scale, phase).
@@ -156,7 +161,7 @@ def _vote_slots(rho, ang, ring_rho):
     return True, best_scale, best_phase
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _assign(ox, oy, near, to_unit, ring_rho, slot_blob):
     """
     Give the neighbours their (ring, slot) in ``slot_blob`` (filled with -1); False if few.
@@ -221,7 +226,7 @@ def _assign(ox, oy, near, to_unit, ring_rho, slot_blob):
     return total >= 8 and most >= 5
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area):
     """
     Slot assignments round centre blob ``ci``, best guess first: (slots, ok).
@@ -295,7 +300,7 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
     return slots, ok
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _map_point(H, x, y):
     """Homography image of plane point (x, y): (u, v, w), w the projective divisor."""
     pu = x * H[0, 0] + y * H[0, 1] + H[0, 2]
@@ -304,7 +309,7 @@ def _map_point(H, x, y):
     return pu / w, pv / w, w
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _local_scale(H, u, v, w):
     """Image scale (pixels per metre, geometric mean of the axes) where the map gives (u, v)."""
     j00 = (H[0, 0] - u * H[2, 0]) / w
@@ -314,7 +319,7 @@ def _local_scale(H, u, v, w):
     return math.sqrt(abs(j00 * j11 - j01 * j10))
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def h_scales(H, xy):
     """Local image scale of the homography at plane points (N, 2)."""
     out = np.empty(xy.shape[0])
@@ -324,7 +329,7 @@ def h_scales(H, xy):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def homography_residuals(H, obj, img, radii, max_error, min_tolerance):
     """
     Each point's distance (pixels) off the homography and its tolerance: (err, tol).
@@ -345,14 +350,14 @@ def homography_residuals(H, obj, img, radii, max_error, min_tolerance):
     return err, tol
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def _median_sorted(s):
     """Median of sorted values (the middle one, or the mean of the two middle ones)."""
     m = s.shape[0] // 2
     return s[m] if s.shape[0] % 2 else (s[m - 1] + s[m]) / 2
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, cell):
     """
     Blobs that could be a card's centre and their evidence: (idx, evidence, reach).
@@ -418,7 +423,7 @@ def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, c
     return idx[:m], evidence[:m], reach
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
     """
     How much the blobs round each candidate ``idx`` look like a card's rings.
@@ -467,7 +472,7 @@ def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
     return score
 
 
-@numba.njit(cache=True, nogil=True)
+@_kernel
 def ring_of_spots(spots, radius, reach, min_spots):
     """
     Whether faint spots (offsets (N, 2) from a small centre) look like its rings.
@@ -500,3 +505,446 @@ def ring_of_spots(spots, radius, reach, min_spots):
         return False, m
     typical = _median_sorted(np.sort(rho[:m]))
     return not math.hypot(sx / m, sy / m) > 0.4 * typical, m
+
+
+# Code reading ------------------------------------------------------------------------
+
+@_kernel
+def _clip(x, lo, hi):
+    """``x`` clipped to [lo, hi]; NaN stays NaN (as numpy's clip)."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+@_kernel
+def _before(a, b):
+    """Sort order of numpy's sorts: ascending, NaN last."""
+    return a < b or (b != b and a == a)
+
+
+@_kernel
+def _classify_one(x0, x1, x2, refs):
+    """
+    Nearest ink (row of ``refs``) of a unit vector and its margin: (ink, margin).
+
+    The margin is how far past the bisector between the nearest ink and
+    the next the vector lies, as a fraction of the way to the nearest
+    ink: 1 on the ink, 0 on the bisector. Angles as numpy's stable sort
+    orders them (ties to the first ink, NaN last).
+    """
+    angle = np.empty(4)
+    for c in range(4):
+        angle[c] = math.acos(_clip(x0 * refs[c, 0] + x1 * refs[c, 1] + x2 * refs[c, 2],
+                                   -1.0, 1.0))
+    best = 0
+    for c in range(1, 4):
+        if _before(angle[c], angle[best]):
+            best = c
+    second = -1
+    for c in range(4):
+        if c != best and (second < 0 or _before(angle[c], angle[second])):
+            second = c
+    dot = refs[best, 0] * refs[second, 0] + refs[best, 1] * refs[second, 1] \
+        + refs[best, 2] * refs[second, 2]
+    between = math.acos(_clip(dot, -1.0, 1.0))
+    if not between != between:
+        between = max(between, 1e-9)
+    return best, (angle[second] - angle[best]) / between
+
+
+@_kernel
+def _dot3(x, y):
+    """Dot product of two 3-vectors, summed left to right (as numpy sums three terms)."""
+    return (x[0] * y[0] + x[1] * y[1]) + x[2] * y[2]
+
+
+@_kernel
+def _solve3(A, b):
+    """Solution of the 3x3 system A x = b (Gaussian elimination, partial pivoting)."""
+    M = A.copy()
+    x = b.copy()
+    for col in range(3):
+        p = col
+        for r in range(col + 1, 3):
+            if abs(M[r, col]) > abs(M[p, col]):
+                p = r
+        if p != col:
+            for c in range(3):
+                M[col, c], M[p, c] = M[p, c], M[col, c]
+            x[col], x[p] = x[p], x[col]
+        for r in range(col + 1, 3):
+            f = M[r, col] / M[col, col]
+            for c in range(col, 3):
+                M[r, c] -= f * M[col, c]
+            x[r] -= f * x[col]
+    for r in range(2, -1, -1):
+        s = x[r]
+        for c in range(r + 1, 3):
+            s -= M[r, c] * x[c]
+        x[r] = s / M[r, r]
+    return x
+
+
+@_kernel
+def fit_response(darkness, inks, light, crosstalk):
+    """
+    Fit the camera's colour response to dots' darkness (N, 3): (white_error, unit inks).
+
+    The model and its reasons are in :mod:`.code_reading`: for
+    each crosstalk ``t`` the sensor's mixing ``M(t)`` (weighted by the
+    light, undone on the paper's colour), each dot given its nearest ink,
+    blur ``a`` per dot and white error ``w`` per channel (free only when
+    three inks are on the ring) by alternating least squares, twice; the
+    ``t`` with the least squared error wins (the first of equal ones).
+    """
+    n = darkness.shape[0]
+    n_t = crosstalk.shape[0]
+    lit = 1.0 - darkness
+    light_max = max(light[0], max(light[1], light[2]))
+    mixed = np.empty((n_t, 4, 3))
+    unit_inks = np.empty((n_t, 4, 3))
+    mix = np.empty((3, 3))
+    for t in range(n_t):
+        tt = crosstalk[t]
+        for i in range(3):
+            for j in range(3):
+                mix[i, j] = tt / 2.0 + (1.0 - 1.5 * tt if i == j else 0.0)
+        lights = _solve3(mix, light)
+        for j in range(3):
+            lights[j] = max(lights[j], 0.05 * light_max)
+        for i in range(3):
+            for j in range(3):
+                mix[i, j] *= lights[j]
+            s = (mix[i, 0] + mix[i, 1]) + mix[i, 2]
+            for j in range(3):
+                mix[i, j] /= s
+        for k in range(4):
+            for d in range(3):
+                mixed[t, k, d] = inks[k, 0] * mix[d, 0] + inks[k, 1] * mix[d, 1] \
+                    + inks[k, 2] * mix[d, 2]
+            norm = math.sqrt(_dot3(mixed[t, k], mixed[t, k]))
+            for d in range(3):
+                unit_inks[t, k, d] = mixed[t, k, d] / norm
+    w = np.ones((n_t, 3))
+    seen = np.empty((n, 3))
+    p = np.empty((n, 3))
+    a = np.empty(n)
+    squares = np.empty(3 * n)
+    err = np.zeros(n_t)
+    for t in range(n_t):
+        for step in range(2):
+            used = np.zeros(4, dtype=np.bool_)
+            for i in range(n):
+                for c in range(3):
+                    seen[i, c] = 1.0 - lit[i, c] / w[t, c]
+                norm = math.sqrt(_dot3(seen[i], seen[i]))
+                if not norm != norm:
+                    norm = max(norm, 1e-9)
+                best, best_dot = 0, -np.inf
+                for k in range(4):
+                    dot = (seen[i, 0] / norm * unit_inks[t, k, 0]
+                           + seen[i, 1] / norm * unit_inks[t, k, 1]
+                           + seen[i, 2] / norm * unit_inks[t, k, 2])
+                    if k == 0 or dot > best_dot:
+                        best, best_dot = k, dot
+                used[best] = True
+                for c in range(3):
+                    p[i, c] = mixed[t, best, c]
+            # The white's error needs three inks on the ring to be told from
+            # the inks' own colours.
+            free = np.count_nonzero(used) >= 3
+            for _ in range(2):
+                for i in range(n):
+                    ps = p[i, 0] * seen[i, 0] + p[i, 1] * seen[i, 1] + p[i, 2] * seen[i, 2]
+                    pp = p[i, 0] * p[i, 0] + p[i, 1] * p[i, 1] + p[i, 2] * p[i, 2]
+                    a[i] = _clip(ps / pp, 0.05, 1.2)
+                for c in range(3):
+                    lq = qq = 0.0
+                    for i in range(n):
+                        q = 1.0 - a[i] * p[i, c]
+                        lq += lit[i, c] * q
+                        qq += q * q
+                    fitted = lq / (qq if qq != qq or qq > 1e-9 else 1e-9)
+                    w[t, c] = _clip(fitted, 0.5, 3.0) if free else 1.0
+                for i in range(n):
+                    for c in range(3):
+                        seen[i, c] = 1.0 - lit[i, c] / w[t, c]
+        for i in range(n):
+            for c in range(3):
+                r = lit[i, c] - w[t, c] * (1.0 - a[i] * p[i, c])
+                squares[3 * i + c] = r * r
+        err[t] = _pairwise_sum(squares, 0, 3 * n)
+    # The first least error (numpy's argmin: the first NaN if any).
+    best = 0
+    for t in range(1, n_t):
+        if err[best] != err[best]:
+            break
+        if err[t] != err[t] or err[t] < err[best]:
+            best = t
+    return w[best].copy(), unit_inks[best].copy()
+
+
+@_kernel
+def _pairwise_block(x, lo, n):
+    """Sum of ``x[lo:lo + n]``, n <= 128, in numpy's order (eight accumulators)."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += x[i]
+        return res
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = x[lo + j]
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += x[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += x[lo + i]
+        i += 1
+    return res
+
+
+@_kernel
+def _pairwise_sum(x, lo, n):
+    """
+    Sum of ``x[lo:lo + n]`` in numpy's order (pairwise, eight accumulators).
+
+    Where a decision compares sums of many terms, the same order gives the
+    same decision as numpy's ``sum``. numpy halves a long run (to a
+    multiple of 8) until the halves are at most 128 long: the same here
+    with a stack instead of recursion (a recursive kernel is not safely
+    cached: numba issue 6061, a segfault when loaded from the cache).
+    """
+    if n <= 128:
+        return _pairwise_block(x, lo, n)
+    depth = 64
+    f_lo = np.empty(depth, dtype=np.intp)
+    f_n = np.empty(depth, dtype=np.intp)
+    f_stage = np.zeros(depth, dtype=np.intp)
+    f_left = np.zeros(depth)
+    f_lo[0], f_n[0] = lo, n
+    top = 1
+    result = 0.0
+    while top > 0:
+        t = top - 1
+        m = f_n[t]
+        half = m // 2 - (m // 2) % 8
+        value = 0.0
+        done = False
+        if m <= 128:
+            value, done = _pairwise_block(x, f_lo[t], m), True
+        elif f_stage[t] == 0:
+            f_stage[t] = 1
+            f_lo[top], f_n[top], f_stage[top] = f_lo[t], half, 0
+            top += 1
+        elif f_stage[t] == 1:
+            f_stage[t] = 2
+            f_lo[top], f_n[top], f_stage[top] = f_lo[t] + half, m - half, 0
+            top += 1
+        else:
+            value, done = f_left[t] + f_left[t + 1], True
+        if done:
+            top -= 1
+            if top == 0:
+                result = value
+            elif f_stage[top - 1] == 1:
+                f_left[top - 1] = value
+            else:
+                f_left[top] = value
+    return result
+
+
+@_kernel
+def _nan_max3(x):
+    """Largest of three values; NaN if any is NaN (as numpy's max)."""
+    m = x[0]
+    for c in range(1, 3):
+        if x[c] != x[c] or x[c] > m:
+            m = x[c]
+        if m != m:
+            return m
+    return m
+
+
+@_kernel
+def _hidden_slots(ring_valid):
+    """Slots (columns of ``ring_valid``, rings x 8) where no ring's dot is seen."""
+    count = 0
+    for k in range(ring_valid.shape[1]):
+        count += not np.any(ring_valid[:, k])
+    return count
+
+
+@_kernel
+def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+                 max_hidden, min_margin, decisive_margin):
+    """
+    Ink of every slot and of the centre, with margins; the numeric part of ``read_code``.
+
+    ``colour`` (1 + rings * 8, 3): each dot's darkness, the centre first
+    then ring r slot k; ``valid`` which were measured, ``partial`` which
+    were read from the part an object left uncovered. Returns ``(ok,
+    centre, agreed, slot_letter, margins, grey, black)``: ``ok`` False
+    when the reading must be rejected (the reasons are in
+    :func:`.code_reading.read_code`); ``agreed`` (8) the letter index per
+    slot (-1 hidden), ``slot_letter`` (rings, 8) per ring (-1 unseen),
+    ``margins`` (9) per slot (NaN hidden) then the centre's, ``grey``
+    (rings, 8) the dots that were grey objects, ``black`` the one black
+    slot (-1 none).
+    """
+    n_ring_dots = n_rings * RING_POINTS
+    n = 1 + n_ring_dots
+    agreed = np.full(RING_POINTS, -1, dtype=np.intp)
+    slot_letter = np.full((n_rings, RING_POINTS), -1, dtype=np.intp)
+    margins = np.full(RING_POINTS + 1, np.nan)
+    grey = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
+    fail = (False, 0, agreed, slot_letter, margins, grey, -1)
+    if colour.shape[0] < n or valid.shape[0] < n or partial.shape[0] < n or colour.shape[1] != 3:
+        return fail
+    ring_valid = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            ring_valid[r, k] = valid[1 + r * RING_POINTS + k]
+
+    if not valid[0] or _hidden_slots(ring_valid) > max_hidden:
+        return fail
+    darkness = np.full((n, 3), np.nan)
+    strength = np.full(n, np.nan)
+    n_ring_rows = 0
+    for i in range(n):
+        if valid[i]:
+            for c in range(3):
+                darkness[i, c] = colour[i, c]
+            strength[i] = _nan_max3(darkness[i])
+            if strength[i] < min_darkness:
+                return fail
+            n_ring_rows += i > 0
+    ring_rows = np.empty(n_ring_rows, dtype=np.intp)
+    m = 0
+    for i in range(1, n):
+        if valid[i]:
+            ring_rows[m] = i
+            m += 1
+    white_error, refs = fit_response(darkness[ring_rows], inks, light, crosstalk)
+    # Every dot's colour direction against the true white (blur left in).
+    unit = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            unit[i, c] = 1.0 - (1.0 - darkness[i, c]) / white_error[c]
+        norm = math.sqrt(_dot3(unit[i], unit[i]))
+        if not norm != norm:
+            norm = max(norm, 1e-9)
+        for c in range(3):
+            unit[i, c] /= norm
+    # Inks seen on the ring are represented by their own dots.
+    first = np.empty(n_ring_rows, dtype=np.intp)
+    for m in range(n_ring_rows):
+        i = ring_rows[m]
+        first[m] = _classify_one(unit[i, 0], unit[i, 1], unit[i, 2], refs)[0]
+    refs = refs.copy()
+    for ink in range(4):
+        mean = np.zeros(3)
+        count = 0
+        for m in range(n_ring_rows):
+            if first[m] == ink:
+                for c in range(3):
+                    mean[c] += unit[ring_rows[m], c]
+                count += 1
+        if count:
+            for c in range(3):
+                mean[c] /= count
+            norm = math.sqrt(_dot3(mean, mean))
+            for c in range(3):
+                refs[ink, c] = mean[c] / norm
+    letter = np.zeros(n, dtype=np.intp)
+    margin = np.empty(n)
+    for i in range(n):
+        letter[i], margin[i] = _classify_one(unit[i, 0], unit[i, 1], unit[i, 2], refs)
+    # A grey object over a dot is no black dot: black is as dark as the
+    # ring's coloured dots are in their darkest channel.
+    coloured = np.empty(n_ring_dots)
+    n_coloured = 0
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k] and letter[i] > 0:
+                coloured[n_coloured] = strength[i]
+                n_coloured += 1
+    ink_dark = 0.0
+    if n_coloured:
+        values = np.sort(coloured[:n_coloured])
+        ink_dark = values[n_coloured - 1] if values[n_coloured - 1] != values[n_coloured - 1] \
+            else _median_sorted(values)
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            i = 1 + r * RING_POINTS + k
+            mean_colour = ((colour[i, 0] + colour[i, 1]) + colour[i, 2]) / 3
+            if ring_valid[r, k] and letter[i] == 0 and mean_colour < 0.7 * ink_dark:
+                grey[r, k] = True
+                ring_valid[r, k] = False
+    if _hidden_slots(ring_valid) > max_hidden:
+        return fail
+    # Both rings must agree, slot by slot: never guess.
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            if ring_valid[r, k]:
+                slot_letter[r, k] = letter[1 + r * RING_POINTS + k]
+                agreed[k] = max(agreed[k], slot_letter[r, k])
+    black = -1
+    n_black = n_shown = 0
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            if ring_valid[r, k] and slot_letter[r, k] != agreed[k]:
+                return fail
+    for k in range(RING_POINTS):
+        n_shown += agreed[k] >= 0
+        if agreed[k] == 0:
+            n_black += 1
+            if black < 0:
+                black = k
+    if n_black > 1 or (n_black == 0 and n_shown == RING_POINTS):
+        return fail
+    # Each slot decided on the evidence of both rings: their dots' colour
+    # directions summed, with a margin.
+    for k in range(RING_POINTS):
+        if agreed[k] < 0:
+            continue
+        total = np.zeros(3)
+        sure = False
+        for r in range(n_rings):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k]:
+                for c in range(3):
+                    total[c] += unit[i, c]
+                sure = sure or not partial[i]
+        norm = math.sqrt(_dot3(total, total))
+        pick, margins[k] = _classify_one(total[0] / norm, total[1] / norm, total[2] / norm, refs)
+        if pick != agreed[k] or margins[k] < min_margin:
+            return fail
+        if not sure and margins[k] < decisive_margin:
+            return fail
+    margins[RING_POINTS] = margin[0]
+    if margin[0] < min_margin:
+        return fail
+    centre = letter[0]
+    if black >= 0:
+        values = np.empty(3 * n_rings)
+        count = 0
+        for r in range(n_rings):
+            if ring_valid[r, black]:
+                for c in range(3):
+                    values[count] = darkness[1 + r * RING_POINTS + black, c]
+                    count += 1
+        k_dark = _pairwise_sum(values, 0, count) / count
+        centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
+        if centre == 0 and centre_dark < 0.8 * k_dark:
+            return fail
+    elif centre == 0:
+        return fail         # a black centre needs point 1 to compare with
+    return True, centre, agreed, slot_letter, margins, grey, black

@@ -633,6 +633,7 @@ def fit_response(darkness, inks, light, crosstalk):
     p = np.empty((n, 3))
     a = np.empty(n)
     squares = np.empty(3 * n)
+    unit = np.empty(3)
     err = np.zeros(n_t)
     for t in range(n_t):
         for step in range(2):
@@ -643,11 +644,11 @@ def fit_response(darkness, inks, light, crosstalk):
                 norm = math.sqrt(_dot3(seen[i], seen[i]))
                 if not norm != norm:
                     norm = max(norm, 1e-9)
+                for c in range(3):
+                    unit[c] = seen[i, c] / norm
                 best, best_dot = 0, -np.inf
                 for k in range(4):
-                    dot = (seen[i, 0] / norm * unit_inks[t, k, 0]
-                           + seen[i, 1] / norm * unit_inks[t, k, 1]
-                           + seen[i, 2] / norm * unit_inks[t, k, 2])
+                    dot = _dot3(unit, unit_inks[t, k])
                     if k == 0 or dot > best_dot:
                         best, best_dot = k, dot
                 used[best] = True

@@ -134,23 +134,28 @@ def _vote_slots(rho, ang, ring_rho):
     best_count = -1
     best_scale = best_phase = 0.0
     found = False
+    dslot = np.empty(n)
     for i in range(n):
+        phase = ang[i]
+        # Off the nearest slot: the same for every ring this neighbour is taken on.
+        for j in range(n):
+            d = _wrap(ang[j] - phase)
+            dslot[j] = abs(d - np.rint(d / _SLOT_ANGLE) * _SLOT_ANGLE)
         for r in range(n_rings):
             scale = rho[i] / ring_rho[r]
             if not (scale > 0.55 and scale < 1.6):
                 continue
-            phase = ang[i]
             count = 0
             fit = 0.0
             for j in range(n):
-                d = _wrap(ang[j] - phase)
-                dslot = abs(d - np.rint(d / _SLOT_ANGLE) * _SLOT_ANGLE)
+                if not dslot[j] < 0.3:
+                    continue
                 dr = abs(rho[j] / (scale * ring_rho[0]) - 1.0)
                 for rr in range(1, n_rings):
                     dr = min(dr, abs(rho[j] / (scale * ring_rho[rr]) - 1.0))
-                if dr < 0.2 and dslot < 0.3:
+                if dr < 0.2:
                     count += 1
-                    qs, qr = dslot / 0.15, dr / 0.1
+                    qs, qr = dslot[j] / 0.15, dr / 0.1
                     fit += math.exp(-(qs * qs) - qr * qr)
             value = fit - 0.5 * abs(math.log(scale))
             if not found or value > best:
@@ -227,34 +232,35 @@ def _assign(ox, oy, near, to_unit, ring_rho, slot_blob):
 
 
 @_kernel
-def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area):
+def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area,
+                second):
     """
-    Slot assignments round centre blob ``ci``, best guess first: (slots, ok).
+    Slot assignment round centre blob ``ci``: (status, slot_blob).
 
-    ``slots`` (2, rings, 8) holds blob indices per ring slot (-1 none) for
-    each way of making the rings circles, ``ok`` which of the two gave an
-    assignment worth verifying. The first way is the centre blob's own
-    ellipse mapped to the unit circle; the second, the neighbours' second
-    moments mapped back to circles of the rings' radii (points spread
-    evenly on a circle of radius R have R^2 / 2 along any axis): a small
-    centre blob, a far card's, is a poor guide to its own shape.
+    ``slot_blob`` (rings, 8) holds a blob index per ring slot, -1 for none.
+    ``status`` 0: no card can be there (whichever way the rings are made
+    circles); 1: an assignment worth verifying; 2: none this way, try the
+    other. The first way (``second`` False) maps the centre blob's own
+    ellipse to the unit circle; the second, the neighbours' second
+    moments to circles of the rings' radii (points spread evenly on a
+    circle of radius R have R^2 / 2 along any axis): a small centre blob,
+    a far card's, is a poor guide to its own shape.
     """
     n = u.shape[0]
     n_rings = ring_rho.shape[0]
-    slots = np.full((2, n_rings, RING_POINTS), -1, dtype=np.intp)
-    ok = np.zeros(2, dtype=np.bool_)
+    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=np.intp)
     if ci < 0 or ci >= n or n_rings < 1:
-        return slots, ok
+        return 0, slot_blob
     cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
     small, big, ex, ey = _eig2(cxx, cxy, cyy)
     if not small > 0.0:
-        return slots, ok
+        return 0, slot_blob
     semi0, semi1 = 2.0 * math.sqrt(small), 2.0 * math.sqrt(big)
     if semi0 < 0.8:
-        return slots, ok
+        return 0, slot_blob
     fill = area[ci] / (math.pi * semi0 * semi1)
     if not (min_fill <= fill and fill <= 1.4):
-        return slots, ok
+        return 0, slot_blob
     # Only blobs within reach of the outer ring: O(blobs) per candidate.
     reach = 1.7 * ring_rho[0] * semi1
     uc, vc, ac = u[ci], v[ci], area[ci]
@@ -275,29 +281,30 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         # A far card's pale ring dots: any blob at all, unless crowded.
         near, n_near = within, n_within
     if n_near < RING_POINTS - 2:
-        return slots, ok
+        return 0, slot_blob
     near = near[:n_near]
     ox = np.empty(n_near)
     oy = np.empty(n_near)
     for i in range(n_near):
         ox[i] = u[near[i]] - uc
         oy[i] = v[near[i]] - vc
-    to_unit = _matrix_function(1.0 / semi0, 1.0 / semi1, ex, ey)
-    ok[0] = _assign(ox, oy, near, to_unit, ring_rho, slots[0])
+    if not second:
+        to_unit = _matrix_function(1.0 / semi0, 1.0 / semi1, ex, ey)
+        return (1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2), slot_blob
     sxx = sxy = syy = 0.0
     for i in range(n_near):
         sxx += ox[i] * ox[i]
         sxy += ox[i] * oy[i]
         syy += oy[i] * oy[i]
     small, big, ex, ey = _eig2(sxx / n_near, sxy / n_near, syy / n_near)
-    if small > 0.0:
-        mean_sq = 0.0
-        for r in range(n_rings):
-            mean_sq += ring_rho[r] * ring_rho[r]
-        target = math.sqrt(mean_sq / n_rings / 2.0)
-        to_unit = _matrix_function(target / math.sqrt(small), target / math.sqrt(big), ex, ey)
-        ok[1] = _assign(ox, oy, near, to_unit, ring_rho, slots[1])
-    return slots, ok
+    if not small > 0.0:
+        return 0, slot_blob
+    mean_sq = 0.0
+    for r in range(n_rings):
+        mean_sq += ring_rho[r] * ring_rho[r]
+    target = math.sqrt(mean_sq / n_rings / 2.0)
+    to_unit = _matrix_function(target / math.sqrt(small), target / math.sqrt(big), ex, ey)
+    return (1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0), slot_blob
 
 
 @_kernel

@@ -167,13 +167,15 @@ def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
     """
     if not 0 <= ci < len(blobs):
         return None
-    slots, ok = card_kernels.group_slots(
-        _f64(blobs.u), _f64(blobs.v), _f64(blobs.area), _i32(blobs.box), _i32(blobs.label),
-        _i32(blobs.labels), int(blobs.scale), int(ci), _ring_rho(config),
-        float(params.min_ellipse_fill), _FAR_MAX_AREA)
-    for t in range(len(ok)):
-        if ok[t]:
-            guess = _verify(blobs, ci, slots[t], config, params, camera)
+    args = (_f64(blobs.u), _f64(blobs.v), _f64(blobs.area), _i32(blobs.box), _i32(blobs.label),
+            _i32(blobs.labels), int(blobs.scale), int(ci), _ring_rho(config),
+            float(params.min_ellipse_fill), _FAR_MAX_AREA)
+    for second in (False, True):
+        status, slot_blob = card_kernels.group_slots(*args, second)
+        if status == 0:
+            return None
+        if status == 1:
+            guess = _verify(blobs, ci, slot_blob, config, params, camera)
             if guess is not None:
                 return guess
     return None

@@ -290,7 +290,7 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         oy[i] = v[near[i]] - vc
     if not second:
         to_unit = _matrix_function(1.0 / semi0, 1.0 / semi1, ex, ey)
-        return (1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2), slot_blob
+        return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2, slot_blob
     sxx = sxy = syy = 0.0
     for i in range(n_near):
         sxx += ox[i] * ox[i]
@@ -304,7 +304,34 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         mean_sq += ring_rho[r] * ring_rho[r]
     target = math.sqrt(mean_sq / n_rings / 2.0)
     to_unit = _matrix_function(target / math.sqrt(small), target / math.sqrt(big), ex, ey)
-    return (1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0), slot_blob
+    return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0, slot_blob
+
+
+@_kernel
+def slot_points(slot_blob, u, v, ci):
+    """
+    Gather the assigned blobs' centres, the centre blob's last: (rows, points).
+
+    ``rows`` indexes the slot-ordered plane points (ring r slot k at
+    ``r * 8 + k``, the centre at ``rings * 8``), ``points`` (N, 2) the
+    blobs' (u, v).
+    """
+    flat = slot_blob.ravel()
+    n = 0
+    for k in range(flat.shape[0]):
+        n += flat[k] >= 0
+    rows = np.empty(n + 1, dtype=np.intp)
+    points = np.empty((n + 1, 2))
+    m = 0
+    for k in range(flat.shape[0]):
+        j = flat[k]
+        if j >= 0 and j < u.shape[0]:
+            rows[m] = k
+            points[m, 0], points[m, 1] = u[j], v[j]
+            m += 1
+    rows[m] = flat.shape[0]
+    points[m, 0], points[m, 1] = u[ci], v[ci]
+    return rows[:m + 1], points[:m + 1]
 
 
 @_kernel
@@ -337,24 +364,37 @@ def h_scales(H, xy):
 
 
 @_kernel
-def homography_residuals(H, obj, img, radii, max_error, min_tolerance):
+def homography_inliers(H, obj, img, radii, max_error, min_tolerance, tol, inliers, first):
     """
-    Each point's distance (pixels) off the homography and its tolerance: (err, tol).
+    Points on the homography: (ok, now, count, same).
 
-    The tolerance is ``max_error`` times the dot's image radius (``radii``
-    in metres times the local scale), at least ``min_tolerance``.
+    A point is on it when its distance from the map of its plane point is
+    below its tolerance: ``max_error`` times its dot's image radius
+    (``radii`` in metres times the local scale), at least
+    ``min_tolerance`` pixels. The tolerances are set (in ``tol``) on the
+    ``first`` fit and kept after. ``ok`` False when ``H`` is not finite;
+    ``count`` the points on it, ``same`` whether they are ``inliers``.
     """
     n = obj.shape[0]
-    err = np.empty(n)
-    tol = np.empty(n)
+    now = np.zeros(n, dtype=np.bool_)
+    for r in range(3):
+        for c in range(3):
+            if not abs(H[r, c]) < np.inf:
+                return False, now, 0, False
+    count = 0
+    same = True
     for i in range(n):
         u, v, w = _map_point(H, obj[i, 0], obj[i, 1])
         du, dv = u - img[i, 0], v - img[i, 1]
-        err[i] = math.sqrt(du * du + dv * dv)
-        t = max_error * _local_scale(H, u, v, w) * radii[i]
-        # NaN stays NaN (as numpy's maximum): such a point is no inlier.
-        tol[i] = t if (t != t or t > min_tolerance) else min_tolerance
-    return err, tol
+        err = math.sqrt(du * du + dv * dv)
+        if first:
+            t = max_error * _local_scale(H, u, v, w) * radii[i]
+            # NaN stays NaN (as numpy's maximum): such a point is no inlier.
+            tol[i] = t if (t != t or t > min_tolerance) else min_tolerance
+        now[i] = err < tol[i]
+        count += now[i]
+        same = same and now[i] == inliers[i]
+    return True, now, count, same
 
 
 @_kernel

@@ -17,9 +17,8 @@ colours say which slot holds point 1.
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
 import math
-from typing import Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -187,10 +186,7 @@ def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
     # Slot order k increases clockwise in the image (v down) = clockwise on the
     # card seen from the front, unless the image is a mirror's (checked later).
     slot_xy, slot_radius = _slot_plane(config)
-    flat = slot_blob.ravel()
-    pos = np.append(np.flatnonzero(flat >= 0), len(flat))      # the centre last
-    js = np.append(flat[pos[:-1]], ci)
-    img = np.column_stack([blobs.u[js], blobs.v[js]])
+    pos, img = card_kernels.slot_points(slot_blob, _f64(blobs.u), _f64(blobs.v), ci)
     und = camera.undistort_pixels(img) if camera is not None else img
     # Blob centroids are rough (decimated, and a colour channel shifted by a
     # lens moves some inks' blobs): a first guess, checked again by the
@@ -200,28 +196,42 @@ def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
                                 min_tolerance=0.75 * blobs.scale)
     if H is None:
         return None
-    flat = flat.copy()
-    flat[pos[:-1][~inliers[:-1]]] = -1
-    slot_blob = flat.reshape(slot_blob.shape)
+    slot_blob.ravel()[pos[:-1][~inliers[:-1]]] = -1       # the kernel's own array
     seen = slot_blob >= 0
     if np.count_nonzero(seen) < 7 or np.count_nonzero(seen.any(axis=0)) < 5:
         return None
     return CardGuess(ci, slot_blob, H, blobs)
 
 
-@lru_cache(maxsize=8)
+# Per pattern configuration, made once: (config, ring radii in centre-dot radii,
+# slot-ordered plane points (ring r slot k at row r * 8 + k, the centre last),
+# their dots' radii). Keyed by identity: hashing a configuration costs more
+# than the work it saves.
+_PER_CONFIG: Dict[int, Tuple[PatternConfig, np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
 def _ring_rho(config: PatternConfig) -> np.ndarray:
     """Return the rings' radii in centre-dot radii."""
-    return np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius
+    return _per_config(config)[1]
 
 
-@lru_cache(maxsize=8)
 def _slot_plane(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
-    """Slot-ordered plane points (ring r slot k at row r * 8 + k, the centre last) and radii."""
-    n_ring = config.n_rings * RING_POINTS
-    xy = np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]])
-    radii = np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius)
-    return xy, radii
+    """Return the slot-ordered plane points (the centre last) and their dots' radii."""
+    return _per_config(config)[2:]
+
+
+def _per_config(config: PatternConfig):
+    entry = _PER_CONFIG.get(id(config))
+    if entry is None or entry[0] is not config:
+        n_ring = config.n_rings * RING_POINTS
+        entry = (config,
+                 np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius,
+                 np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]]),
+                 np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius))
+        if len(_PER_CONFIG) >= 16:
+            _PER_CONFIG.clear()
+        _PER_CONFIG[id(config)] = entry
+    return entry
 
 
 def _f64(a: np.ndarray) -> np.ndarray:
@@ -249,19 +259,16 @@ def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_erro
     obj, img, radii = _f64(obj), _f64(img), _f64(radii)
     max_error, min_tolerance = float(max_error), float(min_tolerance)
     inliers = np.ones(len(obj), dtype=bool)
-    tol = None
-    for _ in range(4):
+    tol = np.empty(len(obj))
+    for step in range(4):
         H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
-        if H is None or not np.all(np.isfinite(H)):
+        if H is None:
             return None, None
-        err, first_tol = card_kernels.homography_residuals(H, obj, img, radii, max_error,
-                                                           min_tolerance)
-        if tol is None:
-            tol = first_tol
-        now = err < tol
-        if np.count_nonzero(now) < min_points or not now[-1]:
+        ok, now, count, same = card_kernels.homography_inliers(
+            H, obj, img, radii, max_error, min_tolerance, tol, inliers, step == 0)
+        if not ok or count < min_points or not now[-1]:
             return None, None
-        if np.array_equal(now, inliers):
+        if same:
             break
         inliers = now
     return H, inliers

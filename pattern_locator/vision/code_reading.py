@@ -22,8 +22,7 @@ are where the card's marks must be dark and their mirror images paper.
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Iterable, Optional, Sequence, Tuple
+from typing import Dict, Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -192,10 +191,20 @@ def resolve_partial(reading: Reading, codes: Sequence[Code], table: np.ndarray,
     return codes[n], p
 
 
-@lru_cache(maxsize=8)
+# Per pattern configuration (by identity: hashing one costs more than the
+# work saved), its inks' darkness.
+_INKS: Dict[int, Tuple[PatternConfig, np.ndarray]] = {}
+
+
 def _inks(config: PatternConfig) -> np.ndarray:
     """Return :func:`ink_darkness` of ``config``, made once."""
-    return np.ascontiguousarray(ink_darkness(config), dtype=np.float64)
+    entry = _INKS.get(id(config))
+    if entry is None or entry[0] is not config:
+        if len(_INKS) >= 16:
+            _INKS.clear()
+        entry = _INKS[id(config)] = (config, np.ascontiguousarray(ink_darkness(config),
+                                                                  dtype=np.float64))
+    return entry[1]
 
 
 # The camera's colour response (card_kernels.fit_response), fitted to the

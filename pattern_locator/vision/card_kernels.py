@@ -135,6 +135,7 @@ def _vote_slots(rho, ang, ring_rho):
     best_scale = best_phase = 0.0
     found = False
     dslot = np.empty(n)
+    term = np.empty(n)
     for i in range(n):
         phase = ang[i]
         # Off the nearest slot: the same for every ring this neighbour is taken on.
@@ -146,8 +147,8 @@ def _vote_slots(rho, ang, ring_rho):
             if not (scale > 0.55 and scale < 1.6):
                 continue
             count = 0
-            fit = 0.0
             for j in range(n):
+                term[j] = 0.0
                 if not dslot[j] < 0.3:
                     continue
                 dr = abs(rho[j] / (scale * ring_rho[0]) - 1.0)
@@ -156,8 +157,10 @@ def _vote_slots(rho, ang, ring_rho):
                 if dr < 0.2:
                     count += 1
                     qs, qr = dslot[j] / 0.15, dr / 0.1
-                    fit += math.exp(-(qs * qs) - qr * qr)
-            value = fit - 0.5 * abs(math.log(scale))
+                    term[j] = math.exp(-(qs * qs) - qr * qr)
+            # Summed in numpy's order: a symmetric card's opposite dots make
+            # near-equal proposals, told apart by the last bits.
+            value = _pairwise_sum(term, 0, n) - 0.5 * abs(math.log(scale))
             if not found or value > best:
                 found = True
                 best, best_count, best_scale, best_phase = value, count, scale, phase

@@ -160,7 +160,7 @@ def _vote_slots(rho, ang, ring_rho):
                     term[j] = math.exp(-(qs * qs) - qr * qr)
             # Summed in numpy's order: a symmetric card's opposite dots make
             # near-equal proposals, told apart by the last bits.
-            value = _pairwise_sum(term, 0, n) - 0.5 * abs(math.log(scale))
+            value = _pairwise_sum(term, n) - 0.5 * abs(math.log(scale))
             if not found or value > best:
                 found = True
                 best, best_count, best_scale, best_phase = value, count, scale, phase
@@ -217,10 +217,20 @@ def _assign(ox, oy, near, to_unit, ring_rho, slot_blob):
         slot[i], ring[i] = k, best_r
         cost[i] = best_dr + dang
         ok[i] = best_dr < 0.25 and dang < 0.35
-    candidates = np.flatnonzero(ok)
-    by_cost = candidates[np.argsort(cost[candidates], kind='mergesort')]
+    # Cheapest first (a stable insertion sort: a few dozen neighbours, and
+    # no library sort to compile).
+    by_cost = np.empty(m, dtype=np.intp)
+    n_ok = 0
+    for i in range(m):
+        if ok[i]:
+            j = n_ok
+            while j > 0 and cost[by_cost[j - 1]] > cost[i]:
+                by_cost[j] = by_cost[j - 1]
+                j -= 1
+            by_cost[j] = i
+            n_ok += 1
     slot_blob[:, :] = -1
-    for i in by_cost:
+    for i in by_cost[:n_ok]:
         if slot_blob[ring[i], slot[i]] < 0:
             slot_blob[ring[i], slot[i]] = idx[i]
     total = 0
@@ -249,21 +259,31 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
     circle of radius R have R^2 / 2 along any axis): a small centre blob,
     a far card's, is a poor guide to its own shape.
     """
+    slot_blob = np.empty((ring_rho.shape[0], RING_POINTS), dtype=np.intp)
+    slot_blob[:, :] = -1
+    status = _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill,
+                         far_max_area, second, slot_blob)
+    return status, slot_blob
+
+
+@_kernel
+def _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area,
+                second, slot_blob):
+    """Do :func:`group_slots`'s work into ``slot_blob``; return its status."""
     n = u.shape[0]
     n_rings = ring_rho.shape[0]
-    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=np.intp)
     if ci < 0 or ci >= n or n_rings < 1:
-        return 0, slot_blob
+        return 0
     cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
     small, big, ex, ey = _eig2(cxx, cxy, cyy)
     if not small > 0.0:
-        return 0, slot_blob
+        return 0
     semi0, semi1 = 2.0 * math.sqrt(small), 2.0 * math.sqrt(big)
     if semi0 < 0.8:
-        return 0, slot_blob
+        return 0
     fill = area[ci] / (math.pi * semi0 * semi1)
     if not (min_fill <= fill and fill <= 1.4):
-        return 0, slot_blob
+        return 0
     # Only blobs within reach of the outer ring: O(blobs) per candidate.
     reach = 1.7 * ring_rho[0] * semi1
     uc, vc, ac = u[ci], v[ci], area[ci]
@@ -284,7 +304,7 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         # A far card's pale ring dots: any blob at all, unless crowded.
         near, n_near = within, n_within
     if n_near < RING_POINTS - 2:
-        return 0, slot_blob
+        return 0
     near = near[:n_near]
     ox = np.empty(n_near)
     oy = np.empty(n_near)
@@ -293,7 +313,7 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         oy[i] = v[near[i]] - vc
     if not second:
         to_unit = _matrix_function(1.0 / semi0, 1.0 / semi1, ex, ey)
-        return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2, slot_blob
+        return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2
     sxx = sxy = syy = 0.0
     for i in range(n_near):
         sxx += ox[i] * ox[i]
@@ -301,13 +321,13 @@ def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
         syy += oy[i] * oy[i]
     small, big, ex, ey = _eig2(sxx / n_near, sxy / n_near, syy / n_near)
     if not small > 0.0:
-        return 0, slot_blob
+        return 0
     mean_sq = 0.0
     for r in range(n_rings):
         mean_sq += ring_rho[r] * ring_rho[r]
     target = math.sqrt(mean_sq / n_rings / 2.0)
     to_unit = _matrix_function(target / math.sqrt(small), target / math.sqrt(big), ex, ey)
-    return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0, slot_blob
+    return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0
 
 
 @_kernel
@@ -380,13 +400,13 @@ def homography_inliers(H, obj, img, radii, max_error, min_tolerance, tol, inlier
     """
     n = obj.shape[0]
     now = np.zeros(n, dtype=np.bool_)
+    finite = True
     for r in range(3):
         for c in range(3):
-            if not abs(H[r, c]) < np.inf:
-                return False, now, 0, False
+            finite = finite and abs(H[r, c]) < np.inf
     count = 0
     same = True
-    for i in range(n):
+    for i in range(n if finite else 0):
         u, v, w = _map_point(H, obj[i, 0], obj[i, 1])
         du, dv = u - img[i, 0], v - img[i, 1]
         err = math.sqrt(du * du + dv * dv)
@@ -397,14 +417,55 @@ def homography_inliers(H, obj, img, radii, max_error, min_tolerance, tol, inlier
         now[i] = err < tol[i]
         count += now[i]
         same = same and now[i] == inliers[i]
-    return True, now, count, same
+    return finite, now, count, same and finite
 
 
 @_kernel
-def _median_sorted(s):
-    """Median of sorted values (the middle one, or the mean of the two middle ones)."""
-    m = s.shape[0] // 2
-    return s[m] if s.shape[0] % 2 else (s[m - 1] + s[m]) / 2
+def _count_true(flags):
+    """Count the True values (numpy's count_nonzero, without compiling it)."""
+    count = 0
+    for k in range(flags.shape[0]):
+        count += flags[k]
+    return count
+
+
+@_kernel
+def _median(values):
+    """
+    Median of values (the middle one, or the mean of the two middle ones), as numpy's.
+
+    A Shell sort of a copy: a few dozen values, and no library sort to
+    compile (numba compiles numpy's sorts anew for every kernel that uses
+    them, seconds each). NaN gives NaN, as numpy's median.
+    """
+    n = values.shape[0]
+    s = values.copy()
+    for k in range(n):
+        if s[k] != s[k]:
+            return s[k]
+    for gap in (701, 301, 132, 57, 23, 10, 4, 1):
+        for i in range(gap, n):
+            x = s[i]
+            j = i
+            while j >= gap and s[j - gap] > x:
+                s[j] = s[j - gap]
+                j -= gap
+            s[j] = x
+    m = n // 2
+    return s[m] if n % 2 else (s[m - 1] + s[m]) / 2
+
+
+@_kernel
+def _first_not_below(sorted_values, x):
+    """First index whose value is not below ``x`` (numpy's ``searchsorted``, side left)."""
+    lo, hi = 0, sorted_values.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_values[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @_kernel
@@ -474,7 +535,7 @@ def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, c
 
 
 @_kernel
-def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
+def ring_evidence(u, v, area, order, idx, reach, min_neighbours, most):
     """
     How much the blobs round each candidate ``idx`` look like a card's rings.
 
@@ -483,11 +544,13 @@ def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
     dot's size (0.12 to 0.9 times the centre's area) that are of one size
     (within a factor 1.6 of their median): their number (at most ``most``)
     plus twice the octants round the centre they cover; 0 with fewer than
-    ``min_neighbours`` neighbours.
+    ``min_neighbours`` neighbours. ``order``: the blobs by column (a stable
+    argsort of ``u``).
     """
     n = u.shape[0]
-    order = np.argsort(u, kind='mergesort')
-    su = u[order]
+    su = np.empty(order.shape[0])
+    for s in range(order.shape[0]):
+        su[s] = u[min(max(order[s], 0), n - 1)]
     score = np.zeros(idx.shape[0])
     near = np.empty(n, dtype=np.intp)
     for i in range(idx.shape[0]):
@@ -495,11 +558,11 @@ def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
         if ci < 0 or ci >= n:
             continue
         r = reach[ci]
-        lo = np.searchsorted(su, u[ci] - r)
-        hi = np.searchsorted(su, u[ci] + r)
+        lo = _first_not_below(su, u[ci] - r)
+        hi = _first_not_below(su, u[ci] + r)
         m = 0
         for s in range(lo, hi):
-            j = order[s]
+            j = min(max(order[s], 0), n - 1)
             ratio = area[j] / area[ci]
             if abs(v[j] - v[ci]) < r and ratio > 0.12 and ratio < 0.9:
                 near[m] = j
@@ -509,7 +572,7 @@ def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
         a = np.empty(m)
         for k in range(m):
             a[k] = area[near[k]]
-        typical = _median_sorted(np.sort(a))
+        typical = _median(a)
         octants = np.zeros(8, dtype=np.bool_)
         alike = 0
         for k in range(m):
@@ -518,7 +581,7 @@ def ring_evidence(u, v, area, idx, reach, min_neighbours, most):
                 alike += 1
                 t = math.atan2(v[j] - v[ci], u[j] - u[ci])
                 octants[int(math.floor((t + math.pi) / (math.pi / 4))) % 8] = True
-        score[i] = min(alike, most) + 2 * np.count_nonzero(octants)
+        score[i] = min(alike, most) + 2 * _count_true(octants)
     return score
 
 
@@ -542,19 +605,18 @@ def ring_of_spots(spots, radius, reach, min_spots):
             rho[m] = r
             keep[m] = i
             m += 1
-    if m < min_spots:
-        return False, m
-    octants = np.zeros(8, dtype=np.bool_)
-    sx = sy = 0.0
-    for k in range(m):
-        x, y = spots[keep[k], 0], spots[keep[k], 1]
-        octants[int((math.atan2(y, x) + math.pi) * (8 / (2 * math.pi))) % 8] = True
-        sx += x
-        sy += y
-    if np.count_nonzero(octants) < 5:
-        return False, m
-    typical = _median_sorted(np.sort(rho[:m]))
-    return not math.hypot(sx / m, sy / m) > 0.4 * typical, m
+    ring_like = m >= min_spots
+    if ring_like:
+        octants = np.zeros(8, dtype=np.bool_)
+        sx = sy = 0.0
+        for k in range(m):
+            x, y = spots[keep[k], 0], spots[keep[k], 1]
+            octants[int((math.atan2(y, x) + math.pi) * (8 / (2 * math.pi))) % 8] = True
+            sx += x
+            sy += y
+        ring_like = _count_true(octants) >= 5 \
+            and not math.hypot(sx / m, sy / m) > 0.4 * _median(rho[:m])
+    return ring_like, m
 
 
 # Code reading ------------------------------------------------------------------------
@@ -706,7 +768,7 @@ def fit_response(darkness, inks, light, crosstalk):
                     p[i, c] = mixed[t, best, c]
             # The white's error needs three inks on the ring to be told from
             # the inks' own colours.
-            free = np.count_nonzero(used) >= 3
+            free = _count_true(used) >= 3
             for _ in range(2):
                 for i in range(n):
                     ps = p[i, 0] * seen[i, 0] + p[i, 1] * seen[i, 1] + p[i, 2] * seen[i, 2]
@@ -727,7 +789,7 @@ def fit_response(darkness, inks, light, crosstalk):
             for c in range(3):
                 r = lit[i, c] - w[t, c] * (1.0 - a[i] * p[i, c])
                 squares[3 * i + c] = r * r
-        err[t] = _pairwise_sum(squares, 0, 3 * n)
+        err[t] = _pairwise_sum(squares, 3 * n)
     # The first least error (numpy's argmin: the first NaN if any).
     best = 0
     for t in range(1, n_t):
@@ -762,9 +824,9 @@ def _pairwise_block(x, lo, n):
 
 
 @_kernel
-def _pairwise_sum(x, lo, n):
+def _pairwise_sum(x, n):
     """
-    Sum of ``x[lo:lo + n]`` in numpy's order (pairwise, eight accumulators).
+    Sum of ``x[:n]`` in numpy's order (pairwise, eight accumulators).
 
     Where a decision compares sums of many terms, the same order gives the
     same decision as numpy's ``sum``. numpy halves a long run (to a
@@ -772,14 +834,15 @@ def _pairwise_sum(x, lo, n):
     with a stack instead of recursion (a recursive kernel is not safely
     cached: numba issue 6061, a segfault when loaded from the cache).
     """
+    start = n - n          # not the literal 0: one compiled signature, not two
     if n <= 128:
-        return _pairwise_block(x, lo, n)
+        return _pairwise_block(x, start, n)
     depth = 64
     f_lo = np.empty(depth, dtype=np.intp)
     f_n = np.empty(depth, dtype=np.intp)
     f_stage = np.zeros(depth, dtype=np.intp)
     f_left = np.zeros(depth)
-    f_lo[0], f_n[0] = lo, n
+    f_lo[0], f_n[0] = start, n
     top = 1
     result = 0.0
     while top > 0:
@@ -828,7 +891,10 @@ def _hidden_slots(ring_valid):
     """Slots (columns of ``ring_valid``, rings x 8) where no ring's dot is seen."""
     count = 0
     for k in range(ring_valid.shape[1]):
-        count += not np.any(ring_valid[:, k])
+        shown = False
+        for r in range(ring_valid.shape[0]):
+            shown = shown or ring_valid[r, k]
+        count += not shown
     return count
 
 
@@ -849,24 +915,44 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
     (rings, 8) the dots that were grey objects, ``black`` the one black
     slot (-1 none).
     """
+    agreed = np.empty(RING_POINTS, dtype=np.intp)
+    agreed[:] = -1
+    slot_letter = np.empty((n_rings, RING_POINTS), dtype=np.intp)
+    slot_letter[:, :] = -1
+    margins = np.empty(RING_POINTS + 1)
+    margins[:] = np.nan
+    grey = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
+    found = np.empty(2, dtype=np.intp)
+    found[0], found[1] = 0, -1
+    # One exit: each return of a large tuple costs numba compile time.
+    ok = _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+                    max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+                    found)
+    return ok, found[0], agreed, slot_letter, margins, grey, found[1]
+
+
+@_kernel
+def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+               max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+               found):
+    """Do :func:`read_colours`'s work into its arrays (``found``: centre, black); False: reject."""
     n_ring_dots = n_rings * RING_POINTS
     n = 1 + n_ring_dots
-    agreed = np.full(RING_POINTS, -1, dtype=np.intp)
-    slot_letter = np.full((n_rings, RING_POINTS), -1, dtype=np.intp)
-    margins = np.full(RING_POINTS + 1, np.nan)
-    grey = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
-    fail = (False, 0, agreed, slot_letter, margins, grey, -1)
     if colour.shape[0] < n or valid.shape[0] < n or partial.shape[0] < n or colour.shape[1] != 3:
-        return fail
+        return False
     ring_valid = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
     for r in range(n_rings):
         for k in range(RING_POINTS):
             ring_valid[r, k] = valid[1 + r * RING_POINTS + k]
 
     if not valid[0] or _hidden_slots(ring_valid) > max_hidden:
-        return fail
-    darkness = np.full((n, 3), np.nan)
-    strength = np.full(n, np.nan)
+        return False
+    darkness = np.empty((n, 3))
+    strength = np.empty(n)
+    for i in range(n):
+        strength[i] = np.nan
+        for c in range(3):
+            darkness[i, c] = np.nan
     n_ring_rows = 0
     for i in range(n):
         if valid[i]:
@@ -874,7 +960,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
                 darkness[i, c] = colour[i, c]
             strength[i] = _nan_max3(darkness[i])
             if strength[i] < min_darkness:
-                return fail
+                return False
             n_ring_rows += i > 0
     ring_rows = np.empty(n_ring_rows, dtype=np.intp)
     m = 0
@@ -927,11 +1013,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
             if ring_valid[r, k] and letter[i] > 0:
                 coloured[n_coloured] = strength[i]
                 n_coloured += 1
-    ink_dark = 0.0
-    if n_coloured:
-        values = np.sort(coloured[:n_coloured])
-        ink_dark = values[n_coloured - 1] if values[n_coloured - 1] != values[n_coloured - 1] \
-            else _median_sorted(values)
+    ink_dark = _median(coloured[:n_coloured]) if n_coloured else 0.0
     for r in range(n_rings):
         for k in range(RING_POINTS):
             i = 1 + r * RING_POINTS + k
@@ -940,7 +1022,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
                 grey[r, k] = True
                 ring_valid[r, k] = False
     if _hidden_slots(ring_valid) > max_hidden:
-        return fail
+        return False
     # Both rings must agree, slot by slot: never guess.
     for r in range(n_rings):
         for k in range(RING_POINTS):
@@ -952,7 +1034,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
     for r in range(n_rings):
         for k in range(RING_POINTS):
             if ring_valid[r, k] and slot_letter[r, k] != agreed[k]:
-                return fail
+                return False
     for k in range(RING_POINTS):
         n_shown += agreed[k] >= 0
         if agreed[k] == 0:
@@ -960,7 +1042,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
             if black < 0:
                 black = k
     if n_black > 1 or (n_black == 0 and n_shown == RING_POINTS):
-        return fail
+        return False
     # Each slot decided on the evidence of both rings: their dots' colour
     # directions summed, with a margin.
     for k in range(RING_POINTS):
@@ -977,12 +1059,12 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
         norm = math.sqrt(_dot3(total, total))
         pick, margins[k] = _classify_one(total[0] / norm, total[1] / norm, total[2] / norm, refs)
         if pick != agreed[k] or margins[k] < min_margin:
-            return fail
+            return False
         if not sure and margins[k] < decisive_margin:
-            return fail
+            return False
     margins[RING_POINTS] = margin[0]
     if margin[0] < min_margin:
-        return fail
+        return False
     centre = letter[0]
     if black >= 0:
         values = np.empty(3 * n_rings)
@@ -992,10 +1074,11 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
                 for c in range(3):
                     values[count] = darkness[1 + r * RING_POINTS + black, c]
                     count += 1
-        k_dark = _pairwise_sum(values, 0, count) / count
+        k_dark = _pairwise_sum(values, count) / count
         centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
         if centre == 0 and centre_dark < 0.8 * k_dark:
-            return fail
+            return False
     elif centre == 0:
-        return fail         # a black centre needs point 1 to compare with
-    return True, centre, agreed, slot_letter, margins, grey, black
+        return False         # a black centre needs point 1 to compare with
+    found[0], found[1] = centre, black
+    return True

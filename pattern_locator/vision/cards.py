@@ -86,8 +86,8 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
         return idx
     # Many blobs crowd the shortlist (a textured floor, foliage): a card's
     # ring dots are alike in size and all round their centre.
-    score = card_kernels.ring_evidence(u, v, area, idx, reach, MIN_NEIGHBOURS,
-                                       2 * RING_POINTS + 2)
+    score = card_kernels.ring_evidence(u, v, area, np.argsort(u, kind='stable'), idx, reach,
+                                       MIN_NEIGHBOURS, 2 * RING_POINTS + 2)
     quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
     return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
 

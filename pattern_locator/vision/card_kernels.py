@@ -1082,3 +1082,40 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
         return False         # a black centre needs point 1 to compare with
     found[0], found[1] = centre, black
     return True
+
+
+def warm_up() -> float:
+    """
+    Compile (or load from the cache) every kernel with the argument types the detector uses.
+
+    The first call of a kernel compiles it (tens of seconds for all of them,
+    once per installation: then it is loaded from the cache in seconds'
+    tenths). A process that must answer its first frame in time (a node)
+    or a test run on a fresh checkout calls this first. Returns the
+    seconds it took.
+    """
+    import time
+    start = time.perf_counter()
+    f8, i4 = np.float64, np.int32
+    n = 8
+    u = np.linspace(10.0, 80.0, n)
+    area = np.full(n, 12.0)
+    box = np.tile(np.array([0, 0, 2, 2], dtype=i4), (n, 1))
+    label = np.arange(1, n + 1, dtype=i4)
+    labels = np.zeros((4, 4), dtype=i4)
+    ring_rho = np.array([4.7, 3.0])
+    idx, _, reach = centre_evidence(u, u, area, box, 2.0, 4.7, 10.0, 6, 16)
+    ring_evidence(u, u, area, np.arange(n), np.arange(2), reach, 6, 18)
+    ring_of_spots(np.zeros((3, 2)), 1.0, 5.0, 6)
+    status, slot_blob = group_slots(u, u, area, box, label, labels, 2, 0, ring_rho, 0.5, 64.0,
+                                    False)
+    slot_points(slot_blob, u, u, 0)
+    homography_inliers(np.eye(3), np.zeros((3, 2)), np.zeros((3, 2)), np.ones(3), 1.0, 1.0,
+                       np.empty(3), np.ones(3, dtype=np.bool_), True)
+    h_scales(np.eye(3), np.zeros((3, 2)))
+    rows = 1 + 2 * RING_POINTS
+    inks = np.eye(4, 3, dtype=f8) + 0.1
+    read_colours(np.full((rows, 3), 0.5), np.ones(rows, dtype=np.bool_),
+                 np.zeros(rows, dtype=np.bool_), 2, inks, np.ones(3), np.linspace(0.0, 0.45, 7),
+                 0.2, 1, 0.35, 0.6)
+    return time.perf_counter() - start

@@ -2,6 +2,7 @@
 
 import math
 
+import numba
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig, RING_POINTS
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
@@ -10,6 +11,7 @@ from pattern_locator.vision import card_kernels
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.cards import _ring_rho, fit_homography, group, rank_candidates
 from pattern_locator.vision.code_reading import read_code
+from pattern_locator.vision.detector import Detector
 from pattern_locator.vision.detector_params import DetectorParams
 from pattern_locator.vision.dots import segment
 import pytest
@@ -124,3 +126,18 @@ def test_the_colour_fit_undoes_the_sensors_crosstalk():
     assert np.allclose(white_error, 1.0, atol=1e-6)
     assert np.allclose(unit_inks, expected, atol=1e-9)
     assert math.isclose(float(np.linalg.norm(unit_inks[1])), 1.0)
+
+
+def test_one_compiled_signature_per_kernel_after_warm_up_and_a_detection(blobs):
+    # Each argument-type combination compiles again (seconds): warm_up's
+    # types must be the detector's, and no call may drift from them.
+    card_kernels.warm_up()
+    T = card_pose_facing(3.0, 30.0, 200.0, -20.0, (80.0, 60.0), VGA)
+    image = render_scene(VGA, [CardPlacement(T, DotCardTexture(CFG, CFG.encode(2, 17, 3)))],
+                         RenderOptions(noise_sigma=1.0, background='photo', seed=8)).image
+    assert Detector(CFG).detect(image, VGA)
+    kernels = [getattr(card_kernels, name) for name in dir(card_kernels)]
+    kernels = [k for k in kernels if isinstance(k, numba.core.registry.CPUDispatcher)]
+    assert len(kernels) > 10
+    assert all(len(k.signatures) <= 1 for k in kernels), \
+        {k.__name__: k.signatures for k in kernels if len(k.signatures) > 1}

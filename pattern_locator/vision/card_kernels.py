@@ -272,7 +272,8 @@ def _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
     """Do :func:`group_slots`'s work into ``slot_blob``; return its status."""
     n = u.shape[0]
     n_rings = ring_rho.shape[0]
-    if ci < 0 or ci >= n or n_rings < 1:
+    if ci < 0 or ci >= n or n_rings < 1 or v.shape[0] < n or area.shape[0] < n \
+            or box.shape[0] < n or box.shape[1] < 4 or label.shape[0] < n:
         return 0
     cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
     small, big, ex, ey = _eig2(cxx, cxy, cyy)
@@ -353,7 +354,9 @@ def slot_points(slot_blob, u, v, ci):
             points[m, 0], points[m, 1] = u[j], v[j]
             m += 1
     rows[m] = flat.shape[0]
-    points[m, 0], points[m, 1] = u[ci], v[ci]
+    points[m, 0] = points[m, 1] = np.nan          # no such blob: no fit (a NaN centre)
+    if ci >= 0 and ci < u.shape[0]:
+        points[m, 0], points[m, 1] = u[ci], v[ci]
     return rows[:m + 1], points[:m + 1]
 
 
@@ -481,6 +484,8 @@ def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, c
     extent, plus 2 pixels.
     """
     n = u.shape[0]
+    if v.shape[0] < n or area.shape[0] < n or box.shape[0] < n or box.shape[1] < 4:
+        raise ValueError('blobs: u, v, area and box (N, 4) must be as long')
     reach = np.empty(n)
     gx = np.empty(n, dtype=np.intp)
     gy = np.empty(n, dtype=np.intp)
@@ -548,6 +553,8 @@ def ring_evidence(u, v, area, order, idx, reach, min_neighbours, most):
     argsort of ``u``).
     """
     n = u.shape[0]
+    if n == 0 or v.shape[0] < n or area.shape[0] < n or reach.shape[0] < n:
+        return np.zeros(idx.shape[0])
     su = np.empty(order.shape[0])
     for s in range(order.shape[0]):
         su[s] = u[min(max(order[s], 0), n - 1)]
@@ -714,6 +721,9 @@ def fit_response(darkness, inks, light, crosstalk):
     """
     n = darkness.shape[0]
     n_t = crosstalk.shape[0]
+    if n_t == 0 or inks.shape[0] < 4 or inks.shape[1] < 3 or light.shape[0] < 3 \
+            or darkness.shape[1] < 3:
+        return np.ones(3), np.zeros((4, 3))          # malformed: no response to undo
     lit = 1.0 - darkness
     light_max = max(light[0], max(light[1], light[2]))
     mixed = np.empty((n_t, 4, 3))
@@ -938,7 +948,9 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
     """Do :func:`read_colours`'s work into its arrays (``found``: centre, black); False: reject."""
     n_ring_dots = n_rings * RING_POINTS
     n = 1 + n_ring_dots
-    if colour.shape[0] < n or valid.shape[0] < n or partial.shape[0] < n or colour.shape[1] != 3:
+    if colour.shape[0] < n or valid.shape[0] < n or partial.shape[0] < n or colour.shape[1] != 3 \
+            or inks.shape[0] != 4 or inks.shape[1] != 3 or light.shape[0] != 3 \
+            or crosstalk.shape[0] == 0:
         return False
     ring_valid = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
     for r in range(n_rings):

@@ -136,8 +136,11 @@ def test_one_compiled_signature_per_kernel_after_warm_up_and_a_detection(blobs):
     image = render_scene(VGA, [CardPlacement(T, DotCardTexture(CFG, CFG.encode(2, 17, 3)))],
                          RenderOptions(noise_sigma=1.0, background='photo', seed=8)).image
     assert Detector(CFG).detect(image, VGA)
-    kernels = [getattr(card_kernels, name) for name in dir(card_kernels)]
-    kernels = [k for k in kernels if isinstance(k, numba.core.registry.CPUDispatcher)]
-    assert len(kernels) > 10
-    assert all(len(k.signatures) <= 1 for k in kernels), \
-        {k.__name__: k.signatures for k in kernels if len(k.signatures) > 1}
+    # The kernels the stages call from Python (other tests here call helpers
+    # with their own types).
+    kernels = [getattr(card_kernels, name) for name in (
+        'centre_evidence', 'ring_evidence', 'ring_of_spots', 'group_slots', 'slot_points',
+        'homography_inliers', 'read_colours')]
+    assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
+    assert all(len(k.signatures) == 1 for k in kernels), \
+        {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}

@@ -18,15 +18,15 @@ colours say which slot holds point 1.
 
 from dataclasses import dataclass
 import math
-from typing import Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 import cv2
 import numpy as np
 
+from . import card_kernels
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
-from .stats import median
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.
@@ -69,41 +69,13 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
     shortlist is ranked by how ring-like its neighbours are.
     """
     n = len(blobs)
-    if n < 1 + MIN_NEIGHBOURS:
+    if n < 1 + MIN_NEIGHBOURS or not np.any(blobs.area >= MIN_CENTRE_AREA):
         return np.zeros(0, dtype=np.intp)
-    area = blobs.area
-    half = 0.5 * blobs.scale * np.maximum(blobs.box[:, 2], blobs.box[:, 3]).astype(float)
-    centre_like = area >= MIN_CENTRE_AREA
-    if not np.any(centre_like):
-        return np.zeros(0, dtype=np.intp)
+    u, v, area = _f64(blobs.u), _f64(blobs.v), _f64(blobs.area)
     rho_out = config.ring_radii[0] / config.centre_dot_radius
-    reach = 1.5 * rho_out * np.maximum(half, np.sqrt(area / np.pi)) + 2.0
-    gx = np.maximum(blobs.u, 0.0).astype(np.intp) // _CELL
-    gy = np.maximum(blobs.v, 0.0).astype(np.intp) // _CELL
-    gw, gh = int(gx.max()) + 1, int(gy.max()) + 1
-    octave = np.floor(np.log2(np.maximum(area, 1.0))).astype(np.intp)
-    first = int(octave.min())
-    levels = int(octave.max()) - first + 1
-    counts = np.bincount(((octave - first) * gh + gy) * gw + gx,
-                         minlength=levels * gh * gw).reshape(levels, gh, gw)
-    # table[k, y, x]: blobs of octave <= first + k - 1 in cells [0, y) x [0, x).
-    table = np.zeros((levels + 1, gh + 1, gw + 1), dtype=np.int32)
-    table[1:, 1:, 1:] = counts.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)
-    idx = np.flatnonzero(centre_like)
-    lo = np.clip(np.floor(np.log2(0.06 * area[idx])).astype(np.intp) - first, 0, levels)
-    hi = np.clip(octave[idx] - first + 1, 0, levels)
-    x0 = np.clip(((blobs.u[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gw)
-    x1 = np.clip(((blobs.u[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gw)
-    y0 = np.clip(((blobs.v[idx] - reach[idx]) // _CELL).astype(np.intp), 0, gh)
-    y1 = np.clip(((blobs.v[idx] + reach[idx]) // _CELL).astype(np.intp) + 1, 0, gh)
-
-    def box(level):
-        return (table[level, y1, x1] - table[level, y0, x1] - table[level, y1, x0]
-                + table[level, y0, x0])
-
-    evidence = box(hi) - box(lo) - 1
-    strong = evidence >= MIN_NEIGHBOURS
-    idx, evidence = idx[strong], evidence[strong]
+    idx, evidence, reach = card_kernels.centre_evidence(
+        u, v, area, _i32(blobs.box), float(blobs.scale), float(rho_out), MIN_CENTRE_AREA,
+        MIN_NEIGHBOURS, _CELL)
     # A card's two rings and its marks make 18 neighbours: more say a crowd
     # (texture, foliage), not more card. Among the crowded, the quietest
     # surroundings first: a card's paper is smooth.
@@ -114,7 +86,8 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
         return idx
     # Many blobs crowd the shortlist (a textured floor, foliage): a card's
     # ring dots are alike in size and all round their centre.
-    score = _ring_evidence(blobs, idx, reach)
+    score = card_kernels.ring_evidence(u, v, area, np.argsort(u, kind='stable'), idx, reach,
+                                       MIN_NEIGHBOURS, 2 * RING_POINTS + 2)
     quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
     return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
 
@@ -165,91 +138,42 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
         # directions, their mean near the centre.
         if own > 6.0 * blobs.area[ci]:
             continue
-        rho = np.hypot(spots[:, 0], spots[:, 1])
-        inside = (rho > 1.5 * radius) & (rho < reach)
-        ring, rho = spots[inside], rho[inside]
-        if len(ring) < MIN_NEIGHBOURS:
-            continue
-        octant = (np.arctan2(ring[:, 1], ring[:, 0]) + np.pi) * (RING_POINTS / (2 * np.pi))
-        if np.count_nonzero(np.bincount(octant.astype(np.intp) % RING_POINTS)) < 5:
-            continue
-        if math.hypot(*ring.mean(axis=0)) > 0.4 * float(median(rho)):
+        ring_like, n_ring = card_kernels.ring_of_spots(_f64(spots), radius, reach,
+                                                       MIN_NEIGHBOURS)
+        if not ring_like:
             continue
         # Darkest first; a crowd of faint spots (more than a card's two
         # rings and marks, and some) says texture: last.
-        found.append((len(ring) > 3 * RING_POINTS, int(ci)))
+        found.append((n_ring > 3 * RING_POINTS, int(ci)))
     return np.array([ci for _, ci in sorted(found, key=lambda f: f[0])[:_FAR_EXTRA]],
                     dtype=np.intp)
 
 
-def _ring_evidence(blobs: Blobs, idx: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """
-    How much the blobs round each candidate look like a card's rings.
-
-    The neighbours within reach (found through the blobs sorted by column,
-    so each candidate costs the blobs in its own reach) of a ring dot's size
-    (a third of the centre's, give or take perspective and blur) that are of
-    one size (within a factor 1.6 of their median), and the octants they
-    cover.
-    """
-    order = np.argsort(blobs.u, kind='stable')
-    su = blobs.u[order]
-    score = np.zeros(len(idx))
-    for i, ci in enumerate(idx):
-        r = reach[ci]
-        lo, hi = np.searchsorted(su, [blobs.u[ci] - r, blobs.u[ci] + r])
-        near = order[lo:hi]
-        dv = blobs.v[near] - blobs.v[ci]
-        ratio = blobs.area[near] / blobs.area[ci]
-        keep = (np.abs(dv) < r) & (ratio > 0.12) & (ratio < 0.9)
-        near, dv = near[keep], dv[keep]
-        if len(near) < MIN_NEIGHBOURS:
-            continue
-        a = blobs.area[near]
-        typical = median(a)
-        alike = (a > typical / 1.6) & (a < typical * 1.6)
-        du = blobs.u[near[alike]] - blobs.u[ci]
-        octant = (np.floor((np.arctan2(dv[alike], du) + np.pi) / (np.pi / 4)).astype(int)) % 8
-        octants = np.count_nonzero(np.bincount(octant, minlength=8))
-        score[i] = min(np.count_nonzero(alike), 2 * RING_POINTS + 2) + 2 * octants
-    return score
-
-
 def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
           camera: Optional[CameraModel]) -> Optional[CardGuess]:
-    """Assign the blobs round centre blob ``ci`` to ring slots; None if no card is there."""
-    ring_rho = np.array(config.ring_radii) / config.centre_dot_radius
-    # Normalising map: the centre blob's ellipse -> unit circle (radius = centre dot).
-    evals, evecs = np.linalg.eigh(blobs.covariance(ci))
-    if evals[0] <= 0:
+    """
+    Assign the blobs round centre blob ``ci`` to ring slots; None if no card is there.
+
+    The centre blob's ellipse, mapped to the unit circle, makes the rings
+    near circles of radii ``R / r_centre``; only blobs within reach of the
+    outer ring and of a ring dot's size are looked at (any blob at all
+    round a far card's small centre, whose ring dots are pale, unless
+    crowded). A vote gives the rings' scale and the slots' angle, each
+    neighbour goes to its nearest (ring, slot), and :func:`_verify` checks
+    the homography. A small centre blob (a far card) is a poor guide to
+    its own shape: when that fails, the neighbours' own second moments
+    make the rings circles. (:func:`.card_kernels.group_slots`.)
+    """
+    if not 0 <= ci < len(blobs):
         return None
-    semi = 2.0 * np.sqrt(evals)                 # semi-axes of the centre dot, px
-    if semi[0] < 0.8:
-        return None
-    fill = blobs.area[ci] / (np.pi * semi[0] * semi[1])
-    if not params.min_ellipse_fill <= fill <= 1.4:
-        return None
-    # Only blobs within reach of the outer ring are looked at: O(blobs) per candidate.
-    reach = 1.7 * ring_rho[0] * semi[1]
-    du, dv = blobs.u - blobs.u[ci], blobs.v - blobs.v[ci]
-    ratio = blobs.area / blobs.area[ci]
-    # Ring dots are a third of the centre's area (more or less with
-    # perspective and blur); specks of noise are far smaller.
-    within = (np.abs(du) < reach) & (np.abs(dv) < reach) & (ratio < 1.2)
-    near = np.flatnonzero(within & (ratio > 0.08))
-    if blobs.area[ci] <= _FAR_MAX_AREA * blobs.scale ** 2:
-        # A far card's ring dots, two or three pixels across and pale, keep
-        # a pixel or two above the threshold: any blob at all, unless the
-        # reach is crowded with them (fine texture).
-        faint = np.flatnonzero(within & (ratio <= 0.08))
-        if len(faint) and len(near) + len(faint) <= 3 * RING_POINTS * len(ring_rho):
-            near = np.flatnonzero(within)
-    if len(near) < RING_POINTS - 2:
-        return None
-    offsets = np.column_stack([du[near], dv[near]])
-    for to_unit in _normalisers(evecs, semi, offsets, ring_rho):
-        slot_blob = _assign(offsets @ to_unit.T, near, ring_rho)
-        if slot_blob is not None:
+    args = (_f64(blobs.u), _f64(blobs.v), _f64(blobs.area), _i32(blobs.box), _i32(blobs.label),
+            _i32(blobs.labels), int(blobs.scale), int(ci), _ring_rho(config),
+            float(params.min_ellipse_fill), _FAR_MAX_AREA)
+    for second in (False, True):
+        status, slot_blob = card_kernels.group_slots(*args, second)
+        if status == 0:
+            return None
+        if status == 1:
             guess = _verify(blobs, ci, slot_blob, config, params, camera)
             if guess is not None:
                 return guess
@@ -259,116 +183,63 @@ def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,
 def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
             params: DetectorParams, camera: Optional[CameraModel]) -> Optional[CardGuess]:
     """Fit the plane-to-image homography to the assigned blobs; None if it does not hold."""
-    n_rings = slot_blob.shape[0]
     # Slot order k increases clockwise in the image (v down) = clockwise on the
     # card seen from the front, unless the image is a mirror's (checked later).
-    slot_xy = config.model_points()[1:, :2].reshape(n_rings, RING_POINTS, 2)
-    pos = np.argwhere(slot_blob >= 0)
-    obj = np.vstack([slot_xy[pos[:, 0], pos[:, 1]], [[0.0, 0.0]]])
-    js = np.append(slot_blob[pos[:, 0], pos[:, 1]], ci)
-    img = np.column_stack([blobs.u[js], blobs.v[js]])
+    slot_xy, slot_radius = _slot_plane(config)
+    pos, img = card_kernels.slot_points(slot_blob, _f64(blobs.u), _f64(blobs.v), ci)
     und = camera.undistort_pixels(img) if camera is not None else img
-    radii = np.full(len(obj), config.ring_dot_radius)
-    radii[-1] = config.centre_dot_radius
     # Blob centroids are rough (decimated, and a colour channel shifted by a
     # lens moves some inks' blobs): a first guess, checked again by the
     # measured centres.
-    H, inliers = fit_homography(obj, und, radii, 1.6 * params.max_homography_error,
+    H, inliers = fit_homography(slot_xy[pos], und, slot_radius[pos],
+                                1.6 * params.max_homography_error,
                                 min_tolerance=0.75 * blobs.scale)
     if H is None:
         return None
-    slot_blob = slot_blob.copy()
-    for (r, kk), good in zip(pos, inliers[:-1]):
-        if not good:
-            slot_blob[r, kk] = -1
+    slot_blob.ravel()[pos[:-1][~inliers[:-1]]] = -1       # the kernel's own array
     seen = slot_blob >= 0
     if np.count_nonzero(seen) < 7 or np.count_nonzero(seen.any(axis=0)) < 5:
         return None
     return CardGuess(ci, slot_blob, H, blobs)
 
 
-def _normalisers(evecs: np.ndarray, semi: np.ndarray, offsets: np.ndarray,
-                 ring_rho: np.ndarray):
-    """
-    Yield maps taking the card's rings to circles of radii ``ring_rho``, best guess first.
-
-    First the centre blob's own ellipse to the unit circle. A small centre
-    blob (a far card) is a poor guide to its own shape; the ring dots
-    round it are a better one: the second moments of points spread evenly
-    on circles of radii R are R^2 / 2 along any axis, so the neighbours'
-    moments map back to circles too (their mean radius put at the rings').
-    """
-    yield evecs @ np.diag(1.0 / semi) @ evecs.T
-    cov = offsets.T @ offsets / len(offsets)
-    w, v = np.linalg.eigh(cov)
-    if w[0] > 0:
-        target = np.sqrt(np.mean(ring_rho ** 2) / 2.0)
-        yield v @ np.diag(target / np.sqrt(w)) @ v.T
+# Per pattern configuration, made once: (config, ring radii in centre-dot radii,
+# slot-ordered plane points (ring r slot k at row r * 8 + k, the centre last),
+# their dots' radii). Keyed by identity: hashing a configuration costs more
+# than the work it saves.
+_PER_CONFIG: Dict[int, Tuple[PatternConfig, np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
-def _assign(rel: np.ndarray, near: np.ndarray, ring_rho: np.ndarray) -> Optional[np.ndarray]:
-    """Give neighbours (``rel``: in the rings-as-circles frame) their (ring, slot); None if few."""
-    rho = np.hypot(rel[:, 0], rel[:, 1])
-    keep = (rho > 0.55 * ring_rho[-1]) & (rho < 1.6 * ring_rho[0])
-    near, rel, rho = near[keep], rel[keep], rho[keep]
-    if len(near) < RING_POINTS - 2:
-        return None
-    ang = np.arctan2(rel[:, 1], rel[:, 0])
-    slots = _vote_slots(rho, ang, ring_rho)
-    if slots is None:
-        return None
-    scale, phase = slots
-    # Each neighbour to (ring, slot) by its predicted position, best first.
-    k = np.round(wrap(ang - phase) / (np.pi / 4)).astype(int) % RING_POINTS
-    dang = np.abs(wrap(ang - (phase + k * np.pi / 4)))
-    n_rings = len(ring_rho)
-    dr = np.abs(rho[:, None] / (scale * ring_rho[None, :]) - 1.0)      # (N, R)
-    ring = np.argmin(dr, axis=1)
-    cost = dr[np.arange(len(near)), ring] + dang
-    ok = (dr[np.arange(len(near)), ring] < 0.25) & (dang < 0.35)
-    slot_blob = np.full((n_rings, RING_POINTS), -1, dtype=int)
-    # Each slot to its cheapest neighbour: the first of the slot in cost order.
-    by_cost = np.flatnonzero(ok)[np.argsort(cost[ok])]
-    _, first = np.unique(ring[by_cost] * RING_POINTS + k[by_cost], return_index=True)
-    chosen = by_cost[first]
-    slot_blob[ring[chosen], k[chosen]] = near[chosen]
-    per_ring = np.count_nonzero(slot_blob >= 0, axis=1)
-    if per_ring.sum() < 8 or per_ring.max() < 5:
-        return None
-    return slot_blob
+def _ring_rho(config: PatternConfig) -> np.ndarray:
+    """Return the rings' radii in centre-dot radii."""
+    return _per_config(config)[1]
 
 
-def _vote_slots(rho: np.ndarray, ang: np.ndarray, ring_rho: np.ndarray
-                ) -> Optional[Tuple[float, float]]:
-    """
-    Scale of the rings and angle of slot 0, by voting over neighbours.
+def _slot_plane(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
+    """Return the slot-ordered plane points (the centre last) and their dots' radii."""
+    return _per_config(config)[2:]
 
-    Every neighbour, taken as a dot of every ring, proposes a scale and a
-    slot angle; the proposal that puts most neighbours on a ring and a
-    45-degree slot wins.
-    """
-    scale = (rho[:, None] / ring_rho[None, :]).ravel()          # (A,)
-    phase = np.repeat(ang, len(ring_rho))                          # (A,)
-    ok_scale = (scale > 0.55) & (scale < 1.6)
-    if not np.any(ok_scale):
-        return None
-    scale, phase = scale[ok_scale], phase[ok_scale]
-    dang = wrap(ang[None, :] - phase[:, None])                      # (A, N)
-    dslot = np.abs(dang - np.round(dang / (np.pi / 4)) * (np.pi / 4))
-    # Off the nearest ring, ring by ring (a reduction over a short last axis is slow).
-    dr = np.abs(rho[None, :] / (scale * ring_rho[0])[:, None] - 1.0)        # (A, N)
-    for radius in ring_rho[1:]:
-        dr = np.minimum(dr, np.abs(rho[None, :] / (scale * radius)[:, None] - 1.0))
-    on_ring = (dr < 0.2) & (dslot < 0.3)
-    count = np.count_nonzero(on_ring, axis=1)
-    # Soft agreement: a card's dots sit on their rings and slots to within a
-    # few percent and degrees; blobs of a textured floor round a centre only
-    # roughly. Among equal scores, the scale the centre's own size predicts.
-    fit = np.sum(on_ring * np.exp(-(dslot / 0.15) ** 2 - (dr / 0.1) ** 2), axis=1)
-    best = int(np.argmax(fit - 0.5 * np.abs(np.log(scale))))
-    if count[best] < RING_POINTS - 2:
-        return None
-    return float(scale[best]), float(phase[best])
+
+def _per_config(config: PatternConfig):
+    entry = _PER_CONFIG.get(id(config))
+    if entry is None or entry[0] is not config:
+        n_ring = config.n_rings * RING_POINTS
+        entry = (config,
+                 np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius,
+                 np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]]),
+                 np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius))
+        if len(_PER_CONFIG) >= 16:
+            _PER_CONFIG.clear()
+        _PER_CONFIG[id(config)] = entry
+    return entry
+
+
+def _f64(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _i32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int32)
 
 
 # Plane geometry -------------------------------------------------------------------
@@ -385,19 +256,19 @@ def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_erro
     """
     if len(obj) < min_points:
         return None, None
+    obj, img, radii = _f64(obj), _f64(img), _f64(radii)
+    max_error, min_tolerance = float(max_error), float(min_tolerance)
     inliers = np.ones(len(obj), dtype=bool)
-    tol = None
-    for _ in range(4):
+    tol = np.empty(len(obj))
+    for step in range(4):
         H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
-        if H is None or not np.all(np.isfinite(H)):
+        if H is None:
             return None, None
-        err = np.linalg.norm(apply_h(H, obj) - img, axis=1)
-        if tol is None:
-            tol = np.maximum(max_error * h_scale(H, obj) * radii, min_tolerance)
-        now = err < tol
-        if np.count_nonzero(now) < min_points or not now[-1]:
+        ok, now, count, same = card_kernels.homography_inliers(
+            H, obj, img, radii, max_error, min_tolerance, tol, inliers, step == 0)
+        if not ok or count < min_points or not now[-1]:
             return None, None
-        if np.array_equal(now, inliers):
+        if same:
             break
         inliers = now
     return H, inliers
@@ -424,8 +295,7 @@ def h_jacobian(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 def h_scale(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Local image scale (pixels per metre, geometric mean of the axes) at plane points."""
-    J = h_jacobian(H, xy)
-    return np.sqrt(np.abs(J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]))
+    return card_kernels.h_scales(_f64(H), _f64(xy))
 
 
 def rotation_about_z(angle: float) -> np.ndarray:
@@ -439,8 +309,3 @@ def rotation_about_z(angle: float) -> np.ndarray:
     c, s = math.cos(angle), math.sin(angle)
     # Clockwise by `angle` in a frame with y up: (x, y) -> (x c + y s, -x s + y c).
     return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def wrap(a):
-    """Angle(s) wrapped to [-pi, pi)."""
-    return (a + np.pi) % (2 * np.pi) - np.pi

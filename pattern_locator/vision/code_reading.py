@@ -22,13 +22,13 @@ are where the card's marks must be dark and their mirror images paper.
 """
 
 from dataclasses import dataclass
-from typing import Iterable, Optional, Sequence, Tuple
+from typing import Dict, Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
+from . import card_kernels
 from .centres import SpotMeasures
 from .detector_params import DetectorParams
-from .stats import median
 from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
 from ..errors import CodeError
 
@@ -80,96 +80,50 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     left uncovered: a slot read from such dots alone must be read with
     ``params.decisive_margin``, not the usual margin.
     """
-    n_ring_dots = n_rings * RING_POINTS
-    colour = np.asarray(colour, dtype=float)
-    ring_valid = valid[1:1 + n_ring_dots].reshape(n_rings, RING_POINTS)
-    if not valid[0] or np.count_nonzero(~ring_valid.any(axis=0)) > max_hidden:
-        return None             # the centre or a whole slot unseen: the code is unknown
-    darkness = np.where(valid[:, None], colour, np.nan)
-    strength = darkness.max(axis=1)
-    if np.any(strength[valid] < params.min_darkness):
-        return None
-    ring_rows = 1 + np.flatnonzero(ring_valid.ravel())
-    # The camera's response, fitted to the ring's dots, is undone on every
-    # dot; inks seen on the ring are then represented by their own dots.
+    n_dots = 1 + n_rings * RING_POINTS
+    colour = np.ascontiguousarray(colour, dtype=np.float64)
+    valid = np.ascontiguousarray(valid, dtype=np.bool_)
+    if colour.shape != (n_dots, 3) or valid.shape != (n_dots,):
+        raise ValueError(f'read_code: colour must be ({n_dots}, 3) and valid ({n_dots},), '
+                         f'got {colour.shape} and {valid.shape}')
+    partial = np.zeros(n_dots, dtype=np.bool_) if partial is None else \
+        np.ascontiguousarray(partial, dtype=np.bool_)
     light = np.ones(3)
     if white is not None and np.size(white) == 3:
         light = srgb_to_linear(np.clip(np.asarray(white, dtype=float), 1.0, 255.0))
         light = light / light.mean()
-    response = _fit_response(darkness[ring_rows], ink_darkness(config), light)
-    seen = response.correct(darkness)
-    unit = seen / np.maximum(np.linalg.norm(seen, axis=1, keepdims=True), 1e-9)
-    refs = response.inks.copy()
-    first = _classify(unit[ring_rows], refs)[0]
-    for c in range(4):
-        members = ring_rows[first == c]
-        if len(members):
-            mean = unit[members].mean(axis=0)
-            refs[c] = mean / np.linalg.norm(mean)
-    letter, margin = _classify(unit, refs)
-    rows = 1 + np.arange(n_ring_dots).reshape(n_rings, RING_POINTS)
-    # Black is as dark as ink in every channel, as dark as the ring's coloured
-    # dots are in their darkest channel: a grey object over a dot is no dot.
-    coloured = ring_valid & (letter[rows] > 0)
-    ink = float(median(strength[rows[coloured]])) if np.any(coloured) else 0.0
-    grey = ring_valid & (letter[rows] == 0) & (np.mean(colour[rows], axis=2) < 0.7 * ink)
-    ring_valid = ring_valid & ~grey
-    shown = ring_valid.any(axis=0)
-    if np.count_nonzero(~shown) > max_hidden:
+    # Kernel: card_kernels.read_colours; the method is in the module's and
+    # _fit_response's documentation.
+    ok, centre, agreed, slot_letter, margins, grey, black = card_kernels.read_colours(
+        colour, valid, partial, n_rings, _inks(config), np.ascontiguousarray(light, np.float64),
+        _CROSSTALK, float(params.min_darkness), int(max_hidden),
+        float(params.min_colour_margin), float(params.decisive_margin))
+    if not ok:
         return None
-    slot_letter = np.where(ring_valid, letter[rows], -1)
-    agreed = slot_letter.max(axis=0)
-    if np.any(ring_valid & (slot_letter != agreed[None, :])):
-        return None             # the rings disagree: never guess
-    black = np.flatnonzero(agreed == 0)
-    if len(black) > 1 or (len(black) == 0 and np.all(shown)):
-        return None
-    # Each slot decided on the evidence of both rings: their dots' colour
-    # directions averaged (a dot alone is noisier), with a margin.
-    slot_unit = np.where(ring_valid[:, :, None], unit[rows], 0.0).sum(axis=0)[shown]
-    slot_unit /= np.linalg.norm(slot_unit, axis=1, keepdims=True)
-    slot_pick, slot_margin = _classify(slot_unit, refs)
-    if np.any(slot_pick != agreed[shown]):
-        return None
-    margins = np.append(slot_margin, margin[0])
-    if np.any(margins < params.min_colour_margin):
-        return None
-    if partial is not None:
-        sure = ring_valid & ~np.asarray(partial, bool)[rows]
-        weak = ~sure.any(axis=0)[shown]
-        if np.any(weak & (slot_margin < params.decisive_margin)):
-            return None
-    centre = int(letter[0])
-    if len(black):
-        k_rows = rows[:, black[0]][ring_valid[:, black[0]]]
-        k_dark = float(np.mean(darkness[k_rows]))
-        if centre == 0 and float(np.mean(darkness[0])) < 0.8 * k_dark:
-            return None
-    elif centre == 0:
-        return None             # a black centre needs point 1 to compare with
+    shown = agreed >= 0
+    black = [black] if black >= 0 else []
     hidden = np.flatnonzero(~shown)
     if len(black) == 0 and len(hidden) == 1:
         # Seven coloured slots: the hidden one is the black, point 1.
-        black, agreed = hidden, np.where(shown, agreed, 0)
+        black, agreed = [int(hidden[0])], np.where(shown, agreed, 0)
     letters = ''.join(LETTERS[a] if a >= 0 else '?' for a in agreed)
-    per_slot = np.full(RING_POINTS, np.nan)
-    per_slot[shown] = slot_margin
-    per_slot = tuple(float(m) for m in np.append(per_slot, margin[0]))
+    margin = float(np.min(margins[np.append(shown, True)]))
+    per_slot = tuple(float(m) for m in margins)
+    rows = 1 + np.arange(n_rings * RING_POINTS).reshape(n_rings, RING_POINTS)
     not_dots = tuple(int(r) for r in rows[grey])
     if len(black) == 0 or np.any(agreed < 0):
         # Partial: the rings' letters in slot order (turned once point 1 is known).
-        return Reading(int(black[0]) if len(black) else -1, None, float(np.min(margins)),
-                       ring_codes(slot_letter, 0), not_dots, letters, LETTERS[centre],
-                       per_slot)
-    point1 = int(black[0])
+        return Reading(black[0] if len(black) else -1, None, margin, ring_codes(slot_letter, 0),
+                       not_dots, letters, LETTERS[centre], per_slot)
+    point1 = black[0]
     slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
     text = LETTERS[centre] + '-' + 'K' + ''.join(LETTERS[agreed[k]] for k in slots[1:])
     try:
         code = Code.parse(text)
     except CodeError:
         return None
-    return Reading(point1, code, float(np.min(margins)), ring_codes(slot_letter, point1),
-                   not_dots, letters, LETTERS[centre], per_slot)
+    return Reading(point1, code, margin, ring_codes(slot_letter, point1), not_dots, letters,
+                   LETTERS[centre], per_slot)
 
 
 def ring_codes(slot_letter: np.ndarray, point1: int) -> Tuple[str, ...]:
@@ -237,87 +191,42 @@ def resolve_partial(reading: Reading, codes: Sequence[Code], table: np.ndarray,
     return codes[n], p
 
 
-def _classify(unit: np.ndarray, refs: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """
-    Nearest ink of each unit vector and its margin.
-
-    The margin is how far past the bisector between the nearest ink and the
-    next the dot lies, as a fraction of the way to the nearest ink: 1 on
-    the ink, 0 on the bisector.
-    """
-    angle = np.arccos(np.clip(unit @ refs.T, -1.0, 1.0))         # (N, 4)
-    order = np.argsort(angle, axis=1)
-    best, second = order[:, 0], order[:, 1]
-    rows = np.arange(len(unit))
-    between = np.arccos(np.clip(np.sum(refs[best] * refs[second], axis=1), -1.0, 1.0))
-    margin = (angle[rows, second] - angle[rows, best]) / np.maximum(between, 1e-9)
-    return best, margin
+# Per pattern configuration (by identity: hashing one costs more than the
+# work saved), its inks' darkness.
+_INKS: Dict[int, Tuple[PatternConfig, np.ndarray]] = {}
 
 
-@dataclass(frozen=True)
-class _Response:
-    """How this camera, light and card white turned the inks' darkness into the measured one."""
+def _inks(config: PatternConfig) -> np.ndarray:
+    """Return :func:`ink_darkness` of ``config``, made once."""
+    entry = _INKS.get(id(config))
+    if entry is None or entry[0] is not config:
+        if len(_INKS) >= 16:
+            _INKS.clear()
+        entry = _INKS[id(config)] = (config, np.ascontiguousarray(ink_darkness(config),
+                                                                  dtype=np.float64))
+    return entry[1]
 
-    white_error: np.ndarray     # (3,) per channel: true white / the white used, ^ gamma
-    inks: np.ndarray            # (4, 3) unit directions of K, R, G, B as the sensor mixes them
 
-    def correct(self, darkness: np.ndarray) -> np.ndarray:
-        """Measured darkness (N, 3) -> darkness against the true white (blur left in)."""
-        return 1.0 - (1.0 - darkness) / self.white_error[None, :]
-
-
-def _fit_response(darkness: np.ndarray, inks: np.ndarray,
-                  light: np.ndarray = np.ones(3)) -> _Response:
-    """
-    Fit the camera's colour response to the ring's dots (darkness (N, 3), linear).
-
-    Blur mixes a dot with paper: darkness ``a * d`` for the ink's ``d``. The
-    sensor's colour filters overlap: each channel sees ``1 - t`` of its own
-    light and ``t / 2`` of each other's, ``d -> M(t) d``, each weighted by
-    the light's colour (``light``, the paper's linear BGR) since the overlap
-    comes before white balance. And the card's
-    white, measured on the paper, may be off in a channel by a factor
-    (clipped by a strong light in that channel, or lit unevenly): then the
-    measured darkness is ``1 - w (1 - a M(t) d)``, which takes much of a
-    light channel's darkness away (a blue dot's blue under blue light).
-    For each ``t`` on a grid, the dots are given their nearest ink, and
-    ``a`` per dot and ``w`` per channel are fitted by alternating least
-    squares; the ``t`` that explains the dots best wins.
-    """
-    lit = 1.0 - darkness                                         # (N, 3)
-    t = _CROSSTALK[:, None, None]                                # all t at once: (T, 1, 1)
-    mix = t / 2.0 + np.eye(3)[None] * (1.0 - 1.5 * t)            # (T, 3, 3)
-    # The overlap happens before white balance: a channel takes in its
-    # neighbours' light in proportion to how much of it there is. The
-    # paper's colour as seen has been through the overlap too: undo it.
-    seen_light = np.broadcast_to(light, (len(mix), 3))[..., None]
-    lights = np.clip(np.linalg.solve(mix, seen_light)[..., 0], 0.05 * light.max(), None)  # (T, 3)
-    mix = mix * lights[:, None, :]
-    mix /= mix.sum(axis=2, keepdims=True)
-    mixed = np.einsum('kc,tdc->tkd', inks, mix)                  # (T, 4, 3)
-    unit_inks = mixed / np.linalg.norm(mixed, axis=2, keepdims=True)
-    w = np.ones((len(_CROSSTALK), 1, 3))
-    rows = np.arange(len(_CROSSTALK))[:, None]
-    for step in range(2):
-        seen = 1.0 - lit[None] / w                             # (T, N, 3)
-        unit = seen / np.maximum(np.linalg.norm(seen, axis=2, keepdims=True), 1e-9)
-        nearest = np.argmax(np.einsum('tnc,tkc->tnk', unit, unit_inks), axis=2)    # (T, N)
-        p = mixed[rows, nearest]                                 # (T, N, 3)
-        # The white's error needs three inks on the ring to be told from the
-        # inks' own colours (a ring of one colour and black cannot).
-        free = np.array([len(set(row)) >= 3 for row in nearest.tolist()])[:, None, None]
-        for _ in range(2):
-            # a per dot, given w: 1 - light / w = a p.
-            a = np.clip(np.sum(p * seen, axis=2) / np.sum(p * p, axis=2), 0.05, 1.2)
-            # w per channel, given a: light = w (1 - a p).
-            q = 1.0 - a[..., None] * p
-            fitted = np.clip(np.sum(lit[None] * q, axis=1, keepdims=True)
-                             / np.maximum(np.sum(q * q, axis=1, keepdims=True), 1e-9), 0.5, 3.0)
-            w = np.where(free, fitted, 1.0)
-            seen = 1.0 - lit[None] / w
-    err = np.sum((lit[None] - w * (1.0 - a[..., None] * p)) ** 2, axis=(1, 2))
-    best = int(np.argmin(err))
-    return _Response(w[best, 0], unit_inks[best])
+# The camera's colour response (card_kernels.fit_response), fitted to the
+# ring's dots (darkness (N, 3), linear). Blur mixes a dot with paper:
+# darkness ``a * d`` for the ink's ``d``. The sensor's colour filters
+# overlap: each channel sees ``1 - t`` of its own light and ``t / 2`` of
+# each other's, ``d -> M(t) d``, each weighted by the light's colour (the
+# paper's linear BGR) since the overlap comes before white balance; the
+# paper's colour as seen has been through the overlap too, and is undone.
+# And the card's white, measured on the paper, may be off in a channel by a
+# factor (clipped by a strong light in that channel, or lit unevenly): then
+# the measured darkness is ``1 - w (1 - a M(t) d)``, which takes much of a
+# light channel's darkness away (a blue dot's blue under blue light). For
+# each ``t`` on a grid (_CROSSTALK), the dots are given their nearest ink,
+# and ``a`` per dot and ``w`` per channel are fitted by alternating least
+# squares; the white's error needs three inks on the ring to be told from
+# the inks' own colours (a ring of one colour and black cannot). The ``t``
+# that explains the dots best wins; its ``w`` is undone on every dot.
+#
+# Each dot then takes the nearest ink by angle, with a margin: how far past
+# the bisector between the nearest ink and the next it lies, as a fraction
+# of the way to the nearest ink (1 on the ink, 0 on the bisector).
 
 
 def handedness(marks: SpotMeasures, black_peak: float) -> str:

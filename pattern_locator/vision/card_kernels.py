@@ -1,0 +1,1141 @@
+"""
+Compiled kernels of the cards and code stages (:mod:`.cards`, :mod:`.code_reading`).
+
+The work of these stages is many small sums and comparisons over a few
+dozen blobs or dots per candidate: in numpy it is the fixed cost of a
+few thousand small calls a frame, not arithmetic. Here each step is one
+call of a loop compiled by numba. The method and its reasons are
+documented where it is orchestrated (:mod:`.cards`, :mod:`.code_reading`);
+these kernels do the same arithmetic, in the same order where a decision
+depends on it.
+
+numba does not check bounds: every index a kernel computes is clipped or
+tested against its array's shape here, and the callers pass contiguous
+arrays of fixed dtypes (float64 values, int32 labels and boxes, intp
+indices) so that each kernel compiles once (``cache=True``: once per
+installation, then loaded).
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from ..card.pattern import RING_POINTS
+
+# Compiled once per installation (cached beside the module), free of the GIL,
+# and with numpy's arithmetic: a division by zero gives inf or NaN as in the
+# numpy code these kernels replace, not Python's ZeroDivisionError.
+_kernel = numba.njit(cache=True, nogil=True, error_model='numpy')
+
+_SLOT_ANGLE = math.pi / 4          # 45 degrees between ring slots
+_TWO_PI = 2 * math.pi
+
+
+@_kernel
+def _wrap(a):
+    """Angle wrapped to [-pi, pi) (``%`` as Python's and numpy's: the divisor's sign)."""
+    return (a + math.pi) % _TWO_PI - math.pi
+
+
+@_kernel
+def _eig2(a, b, c):
+    """
+    Eigenvalues (ascending) of [[a, b], [b, c]] and the unit eigenvector of the larger.
+
+    The smaller eigenvalue is taken from the product (as LAPACK's 2x2 solver
+    does), not from the difference of two near-equal numbers.
+    """
+    sm = a + c
+    rt = math.hypot(a - c, 2.0 * b)
+    big = 0.5 * (sm + rt)
+    small = 0.5 * (sm - rt)
+    if sm > 0.0 and big > 0.0:
+        acmx, acmn = (a, c) if abs(a) > abs(c) else (c, a)
+        small = (acmx / big) * acmn - (b / big) * b
+    # Two expressions of the same eigenvector: the longer is the accurate one.
+    x1, y1 = big - c, b
+    x2, y2 = b, big - a
+    if x1 * x1 + y1 * y1 >= x2 * x2 + y2 * y2:
+        ex, ey = x1, y1
+    else:
+        ex, ey = x2, y2
+    norm = math.hypot(ex, ey)
+    if norm > 0.0:
+        ex, ey = ex / norm, ey / norm
+    else:
+        ex, ey = 1.0, 0.0
+    return small, big, ex, ey
+
+
+@_kernel
+def _matrix_function(f_small, f_big, ex, ey):
+    """Symmetric 2x2 map with eigenvalues f_small, f_big; (ex, ey) the f_big direction."""
+    out = np.empty((2, 2))
+    d = f_big - f_small
+    out[0, 0] = f_small + d * ex * ex
+    out[0, 1] = d * ex * ey
+    out[1, 0] = out[0, 1]
+    out[1, 1] = f_small + d * ey * ey
+    return out
+
+
+@_kernel
+def blob_covariance(labels, box, label, scale):
+    """
+    Second central moments (image pixels^2) of one component: (xx, xy, yy).
+
+    As :meth:`.dots.Blobs.covariance` (OpenCV's moments of the component's
+    mask, plus a pixel's own 1/12) from integer sums over its box, clipped
+    to the label image.
+    """
+    h, w = labels.shape
+    x0 = min(max(int(box[0]), 0), w)
+    y0 = min(max(int(box[1]), 0), h)
+    x1 = min(max(x0 + int(box[2]), x0), w)
+    y1 = min(max(y0 + int(box[3]), y0), h)
+    m00 = m10 = m01 = m20 = m11 = m02 = 0
+    for y in range(y0, y1):
+        yy = y - y0
+        for x in range(x0, x1):
+            if labels[y, x] == label:
+                xx = x - x0
+                m00 += 1
+                m10 += xx
+                m01 += yy
+                m20 += xx * xx
+                m11 += xx * yy
+                m02 += yy * yy
+    inv = 1.0 / m00 if m00 > 0 else 0.0
+    cx, cy = m10 * inv, m01 * inv
+    mu20 = m20 - m10 * cx
+    mu11 = m11 - m10 * cy
+    mu02 = m02 - m01 * cy
+    a = max(float(m00), 1.0)
+    s2 = float(scale * scale)
+    return s2 * (mu20 / a + 1 / 12), s2 * (mu11 / a), s2 * (mu02 / a + 1 / 12)
+
+
+@_kernel
+def _vote_slots(rho, ang, ring_rho):
+    """
+    Scale of the rings and angle of slot 0 by voting; (found, scale, phase).
+
+    Every neighbour, taken as a dot of every ring, proposes a scale and a
+    slot angle; the proposal that puts most neighbours on a ring and a
+    45-degree slot, softly weighted (a card's dots sit on their rings and
+    slots to within a few percent and degrees, a textured floor's blobs
+    only roughly), wins; among equal scores the scale the centre's own
+    size predicts. The first best proposal in (neighbour, ring) order.
+    """
+    n = rho.shape[0]
+    n_rings = ring_rho.shape[0]
+    best = -np.inf
+    best_count = -1
+    best_scale = best_phase = 0.0
+    found = False
+    dslot = np.empty(n)
+    term = np.empty(n)
+    for i in range(n):
+        phase = ang[i]
+        # Off the nearest slot: the same for every ring this neighbour is taken on.
+        for j in range(n):
+            d = _wrap(ang[j] - phase)
+            dslot[j] = abs(d - np.rint(d / _SLOT_ANGLE) * _SLOT_ANGLE)
+        for r in range(n_rings):
+            scale = rho[i] / ring_rho[r]
+            if not (scale > 0.55 and scale < 1.6):
+                continue
+            count = 0
+            for j in range(n):
+                term[j] = 0.0
+                if not dslot[j] < 0.3:
+                    continue
+                dr = abs(rho[j] / (scale * ring_rho[0]) - 1.0)
+                for rr in range(1, n_rings):
+                    dr = min(dr, abs(rho[j] / (scale * ring_rho[rr]) - 1.0))
+                if dr < 0.2:
+                    count += 1
+                    qs, qr = dslot[j] / 0.15, dr / 0.1
+                    term[j] = math.exp(-(qs * qs) - qr * qr)
+            # Summed in numpy's order: a symmetric card's opposite dots make
+            # near-equal proposals, told apart by the last bits.
+            value = _pairwise_sum(term, n) - 0.5 * abs(math.log(scale))
+            if not found or value > best:
+                found = True
+                best, best_count, best_scale, best_phase = value, count, scale, phase
+    if not found or best_count < RING_POINTS - 2:
+        return False, 0.0, 0.0
+    return True, best_scale, best_phase
+
+
+@_kernel
+def _assign(ox, oy, near, to_unit, ring_rho, slot_blob):
+    """
+    Give the neighbours their (ring, slot) in ``slot_blob`` (filled with -1); False if few.
+
+    ``ox, oy``: the neighbours' offsets from the centre (pixels), mapped by
+    ``to_unit`` to the frame where the rings are circles of radii
+    ``ring_rho``. Each neighbour goes to the ring and 45-degree slot
+    nearest its position, each slot to its cheapest neighbour.
+    """
+    n = ox.shape[0]
+    n_rings = ring_rho.shape[0]
+    rho = np.empty(n)
+    ang = np.empty(n)
+    idx = np.empty(n, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        x = ox[i] * to_unit[0, 0] + oy[i] * to_unit[0, 1]
+        y = ox[i] * to_unit[1, 0] + oy[i] * to_unit[1, 1]
+        r = math.hypot(x, y)
+        if r > 0.55 * ring_rho[n_rings - 1] and r < 1.6 * ring_rho[0]:
+            rho[m] = r
+            ang[m] = math.atan2(y, x)
+            idx[m] = near[i]
+            m += 1
+    if m < RING_POINTS - 2:
+        return False
+    rho, ang, idx = rho[:m], ang[:m], idx[:m]
+    found, scale, phase = _vote_slots(rho, ang, ring_rho)
+    if not found:
+        return False
+    # Each neighbour to (ring, slot) by its predicted position, best first.
+    slot = np.empty(m, dtype=np.intp)
+    ring = np.empty(m, dtype=np.intp)
+    cost = np.empty(m)
+    ok = np.zeros(m, dtype=np.bool_)
+    for i in range(m):
+        k = int(np.rint(_wrap(ang[i] - phase) / _SLOT_ANGLE)) % RING_POINTS
+        dang = abs(_wrap(ang[i] - (phase + k * math.pi / 4)))
+        best_r = 0
+        best_dr = abs(rho[i] / (scale * ring_rho[0]) - 1.0)
+        for r in range(1, n_rings):
+            dr = abs(rho[i] / (scale * ring_rho[r]) - 1.0)
+            if dr < best_dr:
+                best_r, best_dr = r, dr
+        slot[i], ring[i] = k, best_r
+        cost[i] = best_dr + dang
+        ok[i] = best_dr < 0.25 and dang < 0.35
+    # Cheapest first (a stable insertion sort: a few dozen neighbours, and
+    # no library sort to compile).
+    by_cost = np.empty(m, dtype=np.intp)
+    n_ok = 0
+    for i in range(m):
+        if ok[i]:
+            j = n_ok
+            while j > 0 and cost[by_cost[j - 1]] > cost[i]:
+                by_cost[j] = by_cost[j - 1]
+                j -= 1
+            by_cost[j] = i
+            n_ok += 1
+    slot_blob[:, :] = -1
+    for i in by_cost[:n_ok]:
+        if slot_blob[ring[i], slot[i]] < 0:
+            slot_blob[ring[i], slot[i]] = idx[i]
+    total = 0
+    most = 0
+    for r in range(n_rings):
+        count = 0
+        for k in range(RING_POINTS):
+            count += slot_blob[r, k] >= 0
+        total += count
+        most = max(most, count)
+    return total >= 8 and most >= 5
+
+
+@_kernel
+def group_slots(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area,
+                second):
+    """
+    Slot assignment round centre blob ``ci``: (status, slot_blob).
+
+    ``slot_blob`` (rings, 8) holds a blob index per ring slot, -1 for none.
+    ``status`` 0: no card can be there (whichever way the rings are made
+    circles); 1: an assignment worth verifying; 2: none this way, try the
+    other. The first way (``second`` False) maps the centre blob's own
+    ellipse to the unit circle; the second, the neighbours' second
+    moments to circles of the rings' radii (points spread evenly on a
+    circle of radius R have R^2 / 2 along any axis): a small centre blob,
+    a far card's, is a poor guide to its own shape.
+    """
+    slot_blob = np.empty((ring_rho.shape[0], RING_POINTS), dtype=np.intp)
+    slot_blob[:, :] = -1
+    status = _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill,
+                         far_max_area, second, slot_blob)
+    return status, slot_blob
+
+
+@_kernel
+def _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, far_max_area,
+                second, slot_blob):
+    """Do :func:`group_slots`'s work into ``slot_blob``; return its status."""
+    n = u.shape[0]
+    n_rings = ring_rho.shape[0]
+    if ci < 0 or ci >= n or n_rings < 1 or v.shape[0] < n or area.shape[0] < n \
+            or box.shape[0] < n or box.shape[1] < 4 or label.shape[0] < n:
+        return 0
+    cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
+    small, big, ex, ey = _eig2(cxx, cxy, cyy)
+    if not small > 0.0:
+        return 0
+    semi0, semi1 = 2.0 * math.sqrt(small), 2.0 * math.sqrt(big)
+    if semi0 < 0.8:
+        return 0
+    fill = area[ci] / (math.pi * semi0 * semi1)
+    if not (min_fill <= fill and fill <= 1.4):
+        return 0
+    # Only blobs within reach of the outer ring: O(blobs) per candidate.
+    reach = 1.7 * ring_rho[0] * semi1
+    uc, vc, ac = u[ci], v[ci], area[ci]
+    near = np.empty(n, dtype=np.intp)
+    within = np.empty(n, dtype=np.intp)
+    n_near = n_within = 0
+    for j in range(n):
+        ratio = area[j] / ac
+        if abs(u[j] - uc) < reach and abs(v[j] - vc) < reach and ratio < 1.2:
+            within[n_within] = j
+            n_within += 1
+            if ratio > 0.08:
+                near[n_near] = j
+                n_near += 1
+    n_faint = n_within - n_near
+    if ac <= far_max_area * scale * scale and n_faint > 0 \
+            and n_within <= 3 * RING_POINTS * n_rings:
+        # A far card's pale ring dots: any blob at all, unless crowded.
+        near, n_near = within, n_within
+    if n_near < RING_POINTS - 2:
+        return 0
+    near = near[:n_near]
+    ox = np.empty(n_near)
+    oy = np.empty(n_near)
+    for i in range(n_near):
+        ox[i] = u[near[i]] - uc
+        oy[i] = v[near[i]] - vc
+    if not second:
+        to_unit = _matrix_function(1.0 / semi0, 1.0 / semi1, ex, ey)
+        return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 2
+    sxx = sxy = syy = 0.0
+    for i in range(n_near):
+        sxx += ox[i] * ox[i]
+        sxy += ox[i] * oy[i]
+        syy += oy[i] * oy[i]
+    small, big, ex, ey = _eig2(sxx / n_near, sxy / n_near, syy / n_near)
+    if not small > 0.0:
+        return 0
+    mean_sq = 0.0
+    for r in range(n_rings):
+        mean_sq += ring_rho[r] * ring_rho[r]
+    target = math.sqrt(mean_sq / n_rings / 2.0)
+    to_unit = _matrix_function(target / math.sqrt(small), target / math.sqrt(big), ex, ey)
+    return 1 if _assign(ox, oy, near, to_unit, ring_rho, slot_blob) else 0
+
+
+@_kernel
+def slot_points(slot_blob, u, v, ci):
+    """
+    Gather the assigned blobs' centres, the centre blob's last: (rows, points).
+
+    ``rows`` indexes the slot-ordered plane points (ring r slot k at
+    ``r * 8 + k``, the centre at ``rings * 8``), ``points`` (N, 2) the
+    blobs' (u, v).
+    """
+    flat = slot_blob.ravel()
+    n = 0
+    for k in range(flat.shape[0]):
+        n += flat[k] >= 0
+    rows = np.empty(n + 1, dtype=np.intp)
+    points = np.empty((n + 1, 2))
+    m = 0
+    for k in range(flat.shape[0]):
+        j = flat[k]
+        if j >= 0 and j < u.shape[0]:
+            rows[m] = k
+            points[m, 0], points[m, 1] = u[j], v[j]
+            m += 1
+    rows[m] = flat.shape[0]
+    points[m, 0] = points[m, 1] = np.nan          # no such blob: no fit (a NaN centre)
+    if ci >= 0 and ci < u.shape[0]:
+        points[m, 0], points[m, 1] = u[ci], v[ci]
+    return rows[:m + 1], points[:m + 1]
+
+
+@_kernel
+def _map_point(H, x, y):
+    """Homography image of plane point (x, y): (u, v, w), w the projective divisor."""
+    pu = x * H[0, 0] + y * H[0, 1] + H[0, 2]
+    pv = x * H[1, 0] + y * H[1, 1] + H[1, 2]
+    w = x * H[2, 0] + y * H[2, 1] + H[2, 2]
+    return pu / w, pv / w, w
+
+
+@_kernel
+def _local_scale(H, u, v, w):
+    """Image scale (pixels per metre, geometric mean of the axes) where the map gives (u, v)."""
+    j00 = (H[0, 0] - u * H[2, 0]) / w
+    j01 = (H[0, 1] - u * H[2, 1]) / w
+    j10 = (H[1, 0] - v * H[2, 0]) / w
+    j11 = (H[1, 1] - v * H[2, 1]) / w
+    return math.sqrt(abs(j00 * j11 - j01 * j10))
+
+
+@_kernel
+def h_scales(H, xy):
+    """Local image scale of the homography at plane points (N, 2)."""
+    out = np.empty(xy.shape[0])
+    for i in range(xy.shape[0]):
+        u, v, w = _map_point(H, xy[i, 0], xy[i, 1])
+        out[i] = _local_scale(H, u, v, w)
+    return out
+
+
+@_kernel
+def homography_inliers(H, obj, img, radii, max_error, min_tolerance, tol, inliers, first):
+    """
+    Points on the homography: (ok, now, count, same).
+
+    A point is on it when its distance from the map of its plane point is
+    below its tolerance: ``max_error`` times its dot's image radius
+    (``radii`` in metres times the local scale), at least
+    ``min_tolerance`` pixels. The tolerances are set (in ``tol``) on the
+    ``first`` fit and kept after. ``ok`` False when ``H`` is not finite;
+    ``count`` the points on it, ``same`` whether they are ``inliers``.
+    """
+    n = obj.shape[0]
+    now = np.zeros(n, dtype=np.bool_)
+    finite = True
+    for r in range(3):
+        for c in range(3):
+            finite = finite and abs(H[r, c]) < np.inf
+    count = 0
+    same = True
+    for i in range(n if finite else 0):
+        u, v, w = _map_point(H, obj[i, 0], obj[i, 1])
+        du, dv = u - img[i, 0], v - img[i, 1]
+        err = math.sqrt(du * du + dv * dv)
+        if first:
+            t = max_error * _local_scale(H, u, v, w) * radii[i]
+            # NaN stays NaN (as numpy's maximum): such a point is no inlier.
+            tol[i] = t if (t != t or t > min_tolerance) else min_tolerance
+        now[i] = err < tol[i]
+        count += now[i]
+        same = same and now[i] == inliers[i]
+    return finite, now, count, same and finite
+
+
+@_kernel
+def _count_true(flags):
+    """Count the True values (numpy's count_nonzero, without compiling it)."""
+    count = 0
+    for k in range(flags.shape[0]):
+        count += flags[k]
+    return count
+
+
+@_kernel
+def _median(values):
+    """
+    Median of values (the middle one, or the mean of the two middle ones), as numpy's.
+
+    A Shell sort of a copy: a few dozen values, and no library sort to
+    compile (numba compiles numpy's sorts anew for every kernel that uses
+    them, seconds each). NaN gives NaN, as numpy's median.
+    """
+    n = values.shape[0]
+    s = values.copy()
+    for k in range(n):
+        if s[k] != s[k]:
+            return s[k]
+    for gap in (701, 301, 132, 57, 23, 10, 4, 1):
+        for i in range(gap, n):
+            x = s[i]
+            j = i
+            while j >= gap and s[j - gap] > x:
+                s[j] = s[j - gap]
+                j -= gap
+            s[j] = x
+    m = n // 2
+    return s[m] if n % 2 else (s[m - 1] + s[m]) / 2
+
+
+@_kernel
+def _first_not_below(sorted_values, x):
+    """First index whose value is not below ``x`` (numpy's ``searchsorted``, side left)."""
+    lo, hi = 0, sorted_values.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if sorted_values[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@_kernel
+def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, cell):
+    """
+    Blobs that could be a card's centre and their evidence: (idx, evidence, reach).
+
+    For every blob of at least ``min_area``, the blobs between 0.06 and 1
+    times its area within ``reach`` of it (a square, on a grid of ``cell``
+    pixels), counted with summed area tables, one per octave of blob area;
+    those with at least ``min_neighbours``, in blob order. ``reach`` (per
+    blob) is 1.5 times the outer ring's radius for a centre of the blob's
+    extent, plus 2 pixels.
+    """
+    n = u.shape[0]
+    if v.shape[0] < n or area.shape[0] < n or box.shape[0] < n or box.shape[1] < 4:
+        raise ValueError('blobs: u, v, area and box (N, 4) must be as long')
+    reach = np.empty(n)
+    gx = np.empty(n, dtype=np.intp)
+    gy = np.empty(n, dtype=np.intp)
+    octave = np.empty(n, dtype=np.intp)
+    gw = gh = 1
+    first, last = 0, 0
+    for j in range(n):
+        if not (abs(u[j]) < 1e7 and abs(v[j]) < 1e7 and area[j] >= 0.0):
+            raise ValueError('blobs: centres and areas must be finite')
+        half = 0.5 * scale * float(max(box[j, 2], box[j, 3]))
+        reach[j] = 1.5 * rho_out * max(half, math.sqrt(area[j] / math.pi)) + 2.0
+        gx[j] = int(max(u[j], 0.0)) // cell
+        gy[j] = int(max(v[j], 0.0)) // cell
+        octave[j] = int(math.floor(math.log2(max(area[j], 1.0))))
+        gw, gh = max(gw, gx[j] + 1), max(gh, gy[j] + 1)
+        if j == 0 or octave[j] < first:
+            first = octave[j]
+        if j == 0 or octave[j] > last:
+            last = octave[j]
+    levels = last - first + 1
+    # table[k, y, x]: blobs of octave <= first + k - 1 in cells [0, y) x [0, x).
+    table = np.zeros((levels + 1, gh + 1, gw + 1), dtype=np.int32)
+    for j in range(n):
+        table[min(max(octave[j] - first, 0), levels - 1) + 1,
+              min(max(gy[j], 0), gh - 1) + 1, min(max(gx[j], 0), gw - 1) + 1] += 1
+    for k in range(1, levels + 1):
+        for y in range(1, gh + 1):
+            for x in range(1, gw + 1):
+                table[k, y, x] += table[k - 1, y, x] + table[k, y - 1, x] + table[k, y, x - 1] \
+                    - table[k - 1, y - 1, x] - table[k - 1, y, x - 1] - table[k, y - 1, x - 1] \
+                    + table[k - 1, y - 1, x - 1]
+    idx = np.empty(n, dtype=np.intp)
+    evidence = np.empty(n, dtype=np.intp)
+    m = 0
+    for j in range(n):
+        if not area[j] >= min_area:
+            continue
+        lo = min(max(int(math.floor(math.log2(0.06 * area[j]))) - first, 0), levels)
+        hi = min(max(octave[j] - first + 1, 0), levels)
+        x0 = min(max(int((u[j] - reach[j]) // cell), 0), gw)
+        x1 = min(max(int((u[j] + reach[j]) // cell) + 1, 0), gw)
+        y0 = min(max(int((v[j] - reach[j]) // cell), 0), gh)
+        y1 = min(max(int((v[j] + reach[j]) // cell) + 1, 0), gh)
+        count = (table[hi, y1, x1] - table[hi, y0, x1] - table[hi, y1, x0] + table[hi, y0, x0]) \
+            - (table[lo, y1, x1] - table[lo, y0, x1] - table[lo, y1, x0] + table[lo, y0, x0]) \
+            - 1         # the blob itself
+        if count >= min_neighbours:
+            idx[m] = j
+            evidence[m] = count
+            m += 1
+    return idx[:m], evidence[:m], reach
+
+
+@_kernel
+def ring_evidence(u, v, area, order, idx, reach, min_neighbours, most):
+    """
+    How much the blobs round each candidate ``idx`` look like a card's rings.
+
+    The neighbours within ``reach`` (found through the blobs sorted by
+    column, so each candidate costs the blobs in its own reach) of a ring
+    dot's size (0.12 to 0.9 times the centre's area) that are of one size
+    (within a factor 1.6 of their median): their number (at most ``most``)
+    plus twice the octants round the centre they cover; 0 with fewer than
+    ``min_neighbours`` neighbours. ``order``: the blobs by column (a stable
+    argsort of ``u``).
+    """
+    n = u.shape[0]
+    if n == 0 or v.shape[0] < n or area.shape[0] < n or reach.shape[0] < n:
+        return np.zeros(idx.shape[0])
+    su = np.empty(order.shape[0])
+    for s in range(order.shape[0]):
+        su[s] = u[min(max(order[s], 0), n - 1)]
+    score = np.zeros(idx.shape[0])
+    near = np.empty(n, dtype=np.intp)
+    for i in range(idx.shape[0]):
+        ci = idx[i]
+        if ci < 0 or ci >= n:
+            continue
+        r = reach[ci]
+        lo = _first_not_below(su, u[ci] - r)
+        hi = _first_not_below(su, u[ci] + r)
+        m = 0
+        for s in range(lo, hi):
+            j = min(max(order[s], 0), n - 1)
+            ratio = area[j] / area[ci]
+            if abs(v[j] - v[ci]) < r and ratio > 0.12 and ratio < 0.9:
+                near[m] = j
+                m += 1
+        if m < min_neighbours:
+            continue
+        a = np.empty(m)
+        for k in range(m):
+            a[k] = area[near[k]]
+        typical = _median(a)
+        octants = np.zeros(8, dtype=np.bool_)
+        alike = 0
+        for k in range(m):
+            j = near[k]
+            if area[j] > typical / 1.6 and area[j] < typical * 1.6:
+                alike += 1
+                t = math.atan2(v[j] - v[ci], u[j] - u[ci])
+                octants[int(math.floor((t + math.pi) / (math.pi / 4))) % 8] = True
+        score[i] = min(alike, most) + 2 * _count_true(octants)
+    return score
+
+
+@_kernel
+def ring_of_spots(spots, radius, reach, min_spots):
+    """
+    Whether faint spots (offsets (N, 2) from a small centre) look like its rings.
+
+    The spots between 1.5 centre radii and ``reach``: at least ``min_spots``
+    of them, in at least five of the eight directions, their mean near
+    the centre (within 0.4 times their median distance). Returns
+    ``(ring-like, number of ring spots)``.
+    """
+    n = spots.shape[0]
+    rho = np.empty(n)
+    keep = np.empty(n, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        r = math.hypot(spots[i, 0], spots[i, 1])
+        if r > 1.5 * radius and r < reach:
+            rho[m] = r
+            keep[m] = i
+            m += 1
+    ring_like = m >= min_spots
+    if ring_like:
+        octants = np.zeros(8, dtype=np.bool_)
+        sx = sy = 0.0
+        for k in range(m):
+            x, y = spots[keep[k], 0], spots[keep[k], 1]
+            octants[int((math.atan2(y, x) + math.pi) * (8 / (2 * math.pi))) % 8] = True
+            sx += x
+            sy += y
+        ring_like = _count_true(octants) >= 5 \
+            and not math.hypot(sx / m, sy / m) > 0.4 * _median(rho[:m])
+    return ring_like, m
+
+
+# Code reading ------------------------------------------------------------------------
+
+@_kernel
+def _clip(x, lo, hi):
+    """``x`` clipped to [lo, hi]; NaN stays NaN (as numpy's clip)."""
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+
+@_kernel
+def _before(a, b):
+    """Sort order of numpy's sorts: ascending, NaN last."""
+    return a < b or (b != b and a == a)
+
+
+@_kernel
+def _classify_one(x0, x1, x2, refs):
+    """
+    Nearest ink (row of ``refs``) of a unit vector and its margin: (ink, margin).
+
+    The margin is how far past the bisector between the nearest ink and
+    the next the vector lies, as a fraction of the way to the nearest
+    ink: 1 on the ink, 0 on the bisector. Angles as numpy's stable sort
+    orders them (ties to the first ink, NaN last).
+    """
+    angle = np.empty(4)
+    for c in range(4):
+        angle[c] = math.acos(_clip(x0 * refs[c, 0] + x1 * refs[c, 1] + x2 * refs[c, 2],
+                                   -1.0, 1.0))
+    best = 0
+    for c in range(1, 4):
+        if _before(angle[c], angle[best]):
+            best = c
+    second = -1
+    for c in range(4):
+        if c != best and (second < 0 or _before(angle[c], angle[second])):
+            second = c
+    dot = refs[best, 0] * refs[second, 0] + refs[best, 1] * refs[second, 1] \
+        + refs[best, 2] * refs[second, 2]
+    between = math.acos(_clip(dot, -1.0, 1.0))
+    if not between != between:
+        between = max(between, 1e-9)
+    return best, (angle[second] - angle[best]) / between
+
+
+@_kernel
+def _dot3(x, y):
+    """Dot product of two 3-vectors, summed left to right (as numpy sums three terms)."""
+    return (x[0] * y[0] + x[1] * y[1]) + x[2] * y[2]
+
+
+@_kernel
+def _solve3(A, b):
+    """Solution of the 3x3 system A x = b (Gaussian elimination, partial pivoting)."""
+    M = A.copy()
+    x = b.copy()
+    for col in range(3):
+        p = col
+        for r in range(col + 1, 3):
+            if abs(M[r, col]) > abs(M[p, col]):
+                p = r
+        if p != col:
+            for c in range(3):
+                M[col, c], M[p, c] = M[p, c], M[col, c]
+            x[col], x[p] = x[p], x[col]
+        for r in range(col + 1, 3):
+            f = M[r, col] / M[col, col]
+            for c in range(col, 3):
+                M[r, c] -= f * M[col, c]
+            x[r] -= f * x[col]
+    for r in range(2, -1, -1):
+        s = x[r]
+        for c in range(r + 1, 3):
+            s -= M[r, c] * x[c]
+        x[r] = s / M[r, r]
+    return x
+
+
+@_kernel
+def fit_response(darkness, inks, light, crosstalk):
+    """
+    Fit the camera's colour response to dots' darkness (N, 3): (white_error, unit inks).
+
+    The model and its reasons are in :mod:`.code_reading`: for
+    each crosstalk ``t`` the sensor's mixing ``M(t)`` (weighted by the
+    light, undone on the paper's colour), each dot given its nearest ink,
+    blur ``a`` per dot and white error ``w`` per channel (free only when
+    three inks are on the ring) by alternating least squares, twice; the
+    ``t`` with the least squared error wins (the first of equal ones).
+    """
+    n = darkness.shape[0]
+    n_t = crosstalk.shape[0]
+    if n_t == 0 or inks.shape[0] < 4 or inks.shape[1] < 3 or light.shape[0] < 3 \
+            or darkness.shape[1] < 3:
+        return np.ones(3), np.zeros((4, 3))          # malformed: no response to undo
+    lit = 1.0 - darkness
+    light_max = max(light[0], max(light[1], light[2]))
+    mixed = np.empty((n_t, 4, 3))
+    unit_inks = np.empty((n_t, 4, 3))
+    mix = np.empty((3, 3))
+    for t in range(n_t):
+        tt = crosstalk[t]
+        for i in range(3):
+            for j in range(3):
+                mix[i, j] = tt / 2.0 + (1.0 - 1.5 * tt if i == j else 0.0)
+        lights = _solve3(mix, light)
+        for j in range(3):
+            lights[j] = max(lights[j], 0.05 * light_max)
+        for i in range(3):
+            for j in range(3):
+                mix[i, j] *= lights[j]
+            s = (mix[i, 0] + mix[i, 1]) + mix[i, 2]
+            for j in range(3):
+                mix[i, j] /= s
+        for k in range(4):
+            for d in range(3):
+                mixed[t, k, d] = inks[k, 0] * mix[d, 0] + inks[k, 1] * mix[d, 1] \
+                    + inks[k, 2] * mix[d, 2]
+            norm = math.sqrt(_dot3(mixed[t, k], mixed[t, k]))
+            for d in range(3):
+                unit_inks[t, k, d] = mixed[t, k, d] / norm
+    w = np.ones((n_t, 3))
+    seen = np.empty((n, 3))
+    p = np.empty((n, 3))
+    a = np.empty(n)
+    squares = np.empty(3 * n)
+    unit = np.empty(3)
+    err = np.zeros(n_t)
+    for t in range(n_t):
+        for step in range(2):
+            used = np.zeros(4, dtype=np.bool_)
+            for i in range(n):
+                for c in range(3):
+                    seen[i, c] = 1.0 - lit[i, c] / w[t, c]
+                norm = math.sqrt(_dot3(seen[i], seen[i]))
+                if not norm != norm:
+                    norm = max(norm, 1e-9)
+                for c in range(3):
+                    unit[c] = seen[i, c] / norm
+                best, best_dot = 0, -np.inf
+                for k in range(4):
+                    dot = _dot3(unit, unit_inks[t, k])
+                    if k == 0 or dot > best_dot:
+                        best, best_dot = k, dot
+                used[best] = True
+                for c in range(3):
+                    p[i, c] = mixed[t, best, c]
+            # The white's error needs three inks on the ring to be told from
+            # the inks' own colours.
+            free = _count_true(used) >= 3
+            for _ in range(2):
+                for i in range(n):
+                    ps = p[i, 0] * seen[i, 0] + p[i, 1] * seen[i, 1] + p[i, 2] * seen[i, 2]
+                    pp = p[i, 0] * p[i, 0] + p[i, 1] * p[i, 1] + p[i, 2] * p[i, 2]
+                    a[i] = _clip(ps / pp, 0.05, 1.2)
+                for c in range(3):
+                    lq = qq = 0.0
+                    for i in range(n):
+                        q = 1.0 - a[i] * p[i, c]
+                        lq += lit[i, c] * q
+                        qq += q * q
+                    fitted = lq / (qq if qq != qq or qq > 1e-9 else 1e-9)
+                    w[t, c] = _clip(fitted, 0.5, 3.0) if free else 1.0
+                for i in range(n):
+                    for c in range(3):
+                        seen[i, c] = 1.0 - lit[i, c] / w[t, c]
+        for i in range(n):
+            for c in range(3):
+                r = lit[i, c] - w[t, c] * (1.0 - a[i] * p[i, c])
+                squares[3 * i + c] = r * r
+        err[t] = _pairwise_sum(squares, 3 * n)
+    # The first least error (numpy's argmin: the first NaN if any).
+    best = 0
+    for t in range(1, n_t):
+        if err[best] != err[best]:
+            break
+        if err[t] != err[t] or err[t] < err[best]:
+            best = t
+    return w[best].copy(), unit_inks[best].copy()
+
+
+@_kernel
+def _pairwise_block(x, lo, n):
+    """Sum of ``x[lo:lo + n]``, n <= 128, in numpy's order (eight accumulators)."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += x[i]
+        return res
+    r = np.empty(8)
+    for j in range(8):
+        r[j] = x[lo + j]
+    i = 8
+    while i < n - n % 8:
+        for j in range(8):
+            r[j] += x[lo + i + j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += x[lo + i]
+        i += 1
+    return res
+
+
+@_kernel
+def _pairwise_sum(x, n):
+    """
+    Sum of ``x[:n]`` in numpy's order (pairwise, eight accumulators).
+
+    Where a decision compares sums of many terms, the same order gives the
+    same decision as numpy's ``sum``. numpy halves a long run (to a
+    multiple of 8) until the halves are at most 128 long: the same here
+    with a stack instead of recursion (a recursive kernel is not safely
+    cached: numba issue 6061, a segfault when loaded from the cache).
+    """
+    start = n - n          # not the literal 0: one compiled signature, not two
+    if n <= 128:
+        return _pairwise_block(x, start, n)
+    depth = 64
+    f_lo = np.empty(depth, dtype=np.intp)
+    f_n = np.empty(depth, dtype=np.intp)
+    f_stage = np.zeros(depth, dtype=np.intp)
+    f_left = np.zeros(depth)
+    f_lo[0], f_n[0] = start, n
+    top = 1
+    result = 0.0
+    while top > 0:
+        t = top - 1
+        m = f_n[t]
+        half = m // 2 - (m // 2) % 8
+        value = 0.0
+        done = False
+        if m <= 128:
+            value, done = _pairwise_block(x, f_lo[t], m), True
+        elif f_stage[t] == 0:
+            f_stage[t] = 1
+            f_lo[top], f_n[top], f_stage[top] = f_lo[t], half, 0
+            top += 1
+        elif f_stage[t] == 1:
+            f_stage[t] = 2
+            f_lo[top], f_n[top], f_stage[top] = f_lo[t] + half, m - half, 0
+            top += 1
+        else:
+            value, done = f_left[t] + f_left[t + 1], True
+        if done:
+            top -= 1
+            if top == 0:
+                result = value
+            elif f_stage[top - 1] == 1:
+                f_left[top - 1] = value
+            else:
+                f_left[top] = value
+    return result
+
+
+@_kernel
+def _nan_max3(x):
+    """Largest of three values; NaN if any is NaN (as numpy's max)."""
+    m = x[0]
+    for c in range(1, 3):
+        if x[c] != x[c] or x[c] > m:
+            m = x[c]
+        if m != m:
+            return m
+    return m
+
+
+@_kernel
+def _hidden_slots(ring_valid):
+    """Slots (columns of ``ring_valid``, rings x 8) where no ring's dot is seen."""
+    count = 0
+    for k in range(ring_valid.shape[1]):
+        shown = False
+        for r in range(ring_valid.shape[0]):
+            shown = shown or ring_valid[r, k]
+        count += not shown
+    return count
+
+
+@_kernel
+def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+                 max_hidden, min_margin, decisive_margin):
+    """
+    Ink of every slot and of the centre, with margins; the numeric part of ``read_code``.
+
+    ``colour`` (1 + rings * 8, 3): each dot's darkness, the centre first
+    then ring r slot k; ``valid`` which were measured, ``partial`` which
+    were read from the part an object left uncovered. Returns ``(ok,
+    centre, agreed, slot_letter, margins, grey, black)``: ``ok`` False
+    when the reading must be rejected (the reasons are in
+    :func:`.code_reading.read_code`); ``agreed`` (8) the letter index per
+    slot (-1 hidden), ``slot_letter`` (rings, 8) per ring (-1 unseen),
+    ``margins`` (9) per slot (NaN hidden) then the centre's, ``grey``
+    (rings, 8) the dots that were grey objects, ``black`` the one black
+    slot (-1 none).
+    """
+    agreed = np.empty(RING_POINTS, dtype=np.intp)
+    agreed[:] = -1
+    slot_letter = np.empty((n_rings, RING_POINTS), dtype=np.intp)
+    slot_letter[:, :] = -1
+    margins = np.empty(RING_POINTS + 1)
+    margins[:] = np.nan
+    grey = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
+    found = np.empty(2, dtype=np.intp)
+    found[0], found[1] = 0, -1
+    # One exit: each return of a large tuple costs numba compile time.
+    ok = _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+                    max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+                    found)
+    return ok, found[0], agreed, slot_letter, margins, grey, found[1]
+
+
+@_kernel
+def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
+               max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+               found):
+    """Do :func:`read_colours`'s work into its arrays (``found``: centre, black); False: reject."""
+    n_ring_dots = n_rings * RING_POINTS
+    n = 1 + n_ring_dots
+    if colour.shape[0] < n or valid.shape[0] < n or partial.shape[0] < n or colour.shape[1] != 3 \
+            or inks.shape[0] != 4 or inks.shape[1] != 3 or light.shape[0] != 3 \
+            or crosstalk.shape[0] == 0:
+        return False
+    ring_valid = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            ring_valid[r, k] = valid[1 + r * RING_POINTS + k]
+
+    if not valid[0] or _hidden_slots(ring_valid) > max_hidden:
+        return False
+    darkness = np.empty((n, 3))
+    strength = np.empty(n)
+    for i in range(n):
+        strength[i] = np.nan
+        for c in range(3):
+            darkness[i, c] = np.nan
+    n_ring_rows = 0
+    for i in range(n):
+        if valid[i]:
+            for c in range(3):
+                darkness[i, c] = colour[i, c]
+            strength[i] = _nan_max3(darkness[i])
+            if strength[i] < min_darkness:
+                return False
+            n_ring_rows += i > 0
+    ring_rows = np.empty(n_ring_rows, dtype=np.intp)
+    m = 0
+    for i in range(1, n):
+        if valid[i]:
+            ring_rows[m] = i
+            m += 1
+    white_error, refs = fit_response(darkness[ring_rows], inks, light, crosstalk)
+    # Every dot's colour direction against the true white (blur left in).
+    unit = np.empty((n, 3))
+    for i in range(n):
+        for c in range(3):
+            unit[i, c] = 1.0 - (1.0 - darkness[i, c]) / white_error[c]
+        norm = math.sqrt(_dot3(unit[i], unit[i]))
+        if not norm != norm:
+            norm = max(norm, 1e-9)
+        for c in range(3):
+            unit[i, c] /= norm
+    # Inks seen on the ring are represented by their own dots.
+    first = np.empty(n_ring_rows, dtype=np.intp)
+    for m in range(n_ring_rows):
+        i = ring_rows[m]
+        first[m] = _classify_one(unit[i, 0], unit[i, 1], unit[i, 2], refs)[0]
+    refs = refs.copy()
+    for ink in range(4):
+        mean = np.zeros(3)
+        count = 0
+        for m in range(n_ring_rows):
+            if first[m] == ink:
+                for c in range(3):
+                    mean[c] += unit[ring_rows[m], c]
+                count += 1
+        if count:
+            for c in range(3):
+                mean[c] /= count
+            norm = math.sqrt(_dot3(mean, mean))
+            for c in range(3):
+                refs[ink, c] = mean[c] / norm
+    letter = np.zeros(n, dtype=np.intp)
+    margin = np.empty(n)
+    for i in range(n):
+        letter[i], margin[i] = _classify_one(unit[i, 0], unit[i, 1], unit[i, 2], refs)
+    # A grey object over a dot is no black dot: black is as dark as the
+    # ring's coloured dots are in their darkest channel.
+    coloured = np.empty(n_ring_dots)
+    n_coloured = 0
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k] and letter[i] > 0:
+                coloured[n_coloured] = strength[i]
+                n_coloured += 1
+    ink_dark = _median(coloured[:n_coloured]) if n_coloured else 0.0
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            i = 1 + r * RING_POINTS + k
+            mean_colour = ((colour[i, 0] + colour[i, 1]) + colour[i, 2]) / 3
+            if ring_valid[r, k] and letter[i] == 0 and mean_colour < 0.7 * ink_dark:
+                grey[r, k] = True
+                ring_valid[r, k] = False
+    if _hidden_slots(ring_valid) > max_hidden:
+        return False
+    # Both rings must agree, slot by slot: never guess.
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            if ring_valid[r, k]:
+                slot_letter[r, k] = letter[1 + r * RING_POINTS + k]
+                agreed[k] = max(agreed[k], slot_letter[r, k])
+    black = -1
+    n_black = n_shown = 0
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            if ring_valid[r, k] and slot_letter[r, k] != agreed[k]:
+                return False
+    for k in range(RING_POINTS):
+        n_shown += agreed[k] >= 0
+        if agreed[k] == 0:
+            n_black += 1
+            if black < 0:
+                black = k
+    if n_black > 1 or (n_black == 0 and n_shown == RING_POINTS):
+        return False
+    # Each slot decided on the evidence of both rings: their dots' colour
+    # directions summed, with a margin.
+    for k in range(RING_POINTS):
+        if agreed[k] < 0:
+            continue
+        total = np.zeros(3)
+        sure = False
+        for r in range(n_rings):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k]:
+                for c in range(3):
+                    total[c] += unit[i, c]
+                sure = sure or not partial[i]
+        norm = math.sqrt(_dot3(total, total))
+        pick, margins[k] = _classify_one(total[0] / norm, total[1] / norm, total[2] / norm, refs)
+        if pick != agreed[k] or margins[k] < min_margin:
+            return False
+        if not sure and margins[k] < decisive_margin:
+            return False
+    margins[RING_POINTS] = margin[0]
+    if margin[0] < min_margin:
+        return False
+    centre = letter[0]
+    if black >= 0:
+        values = np.empty(3 * n_rings)
+        count = 0
+        for r in range(n_rings):
+            if ring_valid[r, black]:
+                for c in range(3):
+                    values[count] = darkness[1 + r * RING_POINTS + black, c]
+                    count += 1
+        k_dark = _pairwise_sum(values, count) / count
+        centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
+        if centre == 0 and centre_dark < 0.8 * k_dark:
+            return False
+    elif centre == 0:
+        return False         # a black centre needs point 1 to compare with
+    found[0], found[1] = centre, black
+    return True
+
+
+def warm_up() -> float:
+    """
+    Compile (or load from the cache) every kernel with the argument types the detector uses.
+
+    The first call of a kernel compiles it (tens of seconds for all of them,
+    once per installation: then it is loaded from the cache in seconds'
+    tenths). A process that must answer its first frame in time (a node)
+    or a test run on a fresh checkout calls this first. Returns the
+    seconds it took.
+    """
+    import time
+    start = time.perf_counter()
+    f8, i4 = np.float64, np.int32
+    n = 8
+    u = np.linspace(10.0, 80.0, n)
+    area = np.full(n, 12.0)
+    box = np.tile(np.array([0, 0, 2, 2], dtype=i4), (n, 1))
+    label = np.arange(1, n + 1, dtype=i4)
+    labels = np.zeros((4, 4), dtype=i4)
+    ring_rho = np.array([4.7, 3.0])
+    idx, _, reach = centre_evidence(u, u, area, box, 2.0, 4.7, 10.0, 6, 16)
+    ring_evidence(u, u, area, np.arange(n), np.arange(2), reach, 6, 18)
+    ring_of_spots(np.zeros((3, 2)), 1.0, 5.0, 6)
+    status, slot_blob = group_slots(u, u, area, box, label, labels, 2, 0, ring_rho, 0.5, 64.0,
+                                    False)
+    slot_points(slot_blob, u, u, 0)
+    homography_inliers(np.eye(3), np.zeros((3, 2)), np.zeros((3, 2)), np.ones(3), 1.0, 1.0,
+                       np.empty(3), np.ones(3, dtype=np.bool_), True)
+    h_scales(np.eye(3), np.zeros((3, 2)))
+    rows = 1 + 2 * RING_POINTS
+    inks = np.eye(4, 3, dtype=f8) + 0.1
+    read_colours(np.full((rows, 3), 0.5), np.ones(rows, dtype=np.bool_),
+                 np.zeros(rows, dtype=np.bool_), 2, inks, np.ones(3), np.linspace(0.0, 0.45, 7),
+                 0.2, 1, 0.35, 0.6)
+    return time.perf_counter() - start
+
+
+# Every kernel compiled, or loaded from the cache, when the module is imported:
+# a node's first frame must not wait for it (a closed loop that starts
+# tracking 0.4 s late misses its settling time). From the cache this takes
+# 0.4 s; the first import after installing compiles them all (about 20 s of
+# one core, once).
+warm_up()

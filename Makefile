@@ -27,6 +27,9 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg package.xml
 	$(PY) -m pip install --quiet --disable-pip-version-check \
 	  -r requirements.txt -r requirements-dev.txt
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@# The detector's compiled passes: built once here (about 40 s of one core)
+	@# into numba's cache beside the modules, not in every test process at once.
+	$(PY) -c 'import pattern_locator.vision.detector'
 	@touch $@
 
 venv: $(STAMP)

@@ -23,10 +23,12 @@ import numpy as np
 
 from ..card.pattern import RING_POINTS
 
-# Compiled once per installation (cached beside the module), free of the GIL,
-# and with numpy's arithmetic: a division by zero gives inf or NaN as in the
-# numpy code these kernels replace, not Python's ZeroDivisionError.
-_kernel = numba.njit(cache=True, nogil=True, error_model='numpy')
+# Compiled once per installation (cached beside the module), with numpy's
+# arithmetic: a division by zero gives inf or NaN as in the numpy code these
+# kernels replace, not Python's ZeroDivisionError. They keep the GIL, as the
+# centres' kernels do (spot_kernels.py says why: a kernel that lets it go
+# waits to get it back from the node's other threads).
+_kernel = numba.njit(cache=True, nogil=False, error_model='numpy')
 
 _SLOT_ANGLE = math.pi / 4          # 45 degrees between ring slots
 _TWO_PI = 2 * math.pi

@@ -149,10 +149,13 @@ class Detector:
         """
         Read a drawn image of two cards; return how many were read right (2 when all is well).
 
-        The first call of the compiled passes compiles them or loads them from
-        numba's cache: a node calls this at start so that its first camera
-        frame does not wait for that. The card drawn is one of the known codes
-        (else any code) with the most colours, so that every colour is read.
+        A node calls this at start: its first camera frame then finds every
+        pass ready (the compiled ones are loaded when their modules are
+        imported; the rest build their caches on a first call), and it learns
+        whether the detector reads its own cards (a pattern configuration
+        that does not match the detector's parameters would not). The card
+        drawn is one of the known codes (else any code) with the most
+        colours, so that every colour is read.
         """
         codes = self._codes or [code for _, code in self.config.all_codes()]
         code = max(codes, key=lambda c: (len(set(c.ring + c.centre)), c.centre != 'K', str(c)))

@@ -101,8 +101,8 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('search', True, 'sweep to search when no card was seen', dynamic=True),
     Param('search_ahead_first', True, 'a head turned aside sweeps back through straight '
           'ahead first (where the robot goes)', dynamic=True),
-    Param('search_after_s', 3.0, 'start the sweep after this long without a target', 0.5,
-          600.0, dynamic=True),
+    Param('search_after_s', 3.0, 'start the sweep after this long without a target (before '
+          'the first one: with a locator running)', 0.5, 600.0, dynamic=True),
     Param('search_speed_deg_s', 20.0, 'pan speed of the sweep', 3.4, 80.0, dynamic=True),
     Param('search_tilt_levels_deg', [0.0, 15.0], 'tilt of successive sweep passes',
           dynamic=True),
@@ -173,7 +173,8 @@ class CameraDriverNode(Node):
         controller = TrackingController(tracking_params(p)) if p['tracking'] else None
         self.camera = EviD31(p['port'], baud=p['baud'], address=p['address'])
         self.loop = HeadLoop(self.camera, controller, clock=self._now_s,
-                             zoom_every=p['zoom_every'], expected_rate_hz=p['rate_hz'])
+                             zoom_every=p['zoom_every'], expected_rate_hz=p['rate_hz'],
+                             locator_present=self._locator_present)
         self.problems = ProblemLog(self.get_logger(), THROTTLE_S)
         # Changes for the camera thread, applied between two cycles.
         self._pending: Dict[str, Any] = {}
@@ -312,6 +313,13 @@ class CameraDriverNode(Node):
         return response
 
     # The camera thread ------------------------------------------------------------------
+
+    def _locator_present(self) -> bool:
+        """Return whether a locator publishes targets (the search waits for one)."""
+        try:
+            return self.count_publishers('pattern_locator/target') > 0
+        except Exception:  # noqa: B902 - the context shut down under the camera thread
+            return True
 
     def _run(self) -> None:
         # Outer loop (re)starts the camera, inner loop runs cycles; the

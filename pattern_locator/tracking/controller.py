@@ -141,7 +141,9 @@ class TrackingController:
     ``search_after_s``), 'search' (a sweep until a target arrives) and 'idle'
     (no head reading newer than ``head_timeout_s``: nothing is moved).
     Without any target yet, the search starts ``search_after_s`` after the
-    first update. All stamps are seconds on one clock (the images'). A head
+    first update at which a locator is present (``update``'s
+    ``locator_present``): before one runs nothing can see the card the
+    sweep would show, and the head is left where it is. All stamps are seconds on one clock (the images'). A head
     reading more than the history (2 s) older than the newest one means the
     clock jumped back (a replayed bag, a restarted simulation): everything
     is forgotten. Thread-safe: the callbacks and :meth:`update` may run on
@@ -302,11 +304,17 @@ class TrackingController:
 
     # Control ----------------------------------------------------------------
 
-    def update(self, now_s: float) -> HeadCommand:
-        """Return the command for the next control period, at time ``now_s``."""
+    def update(self, now_s: float, locator_present: bool = True) -> HeadCommand:
+        """
+        Return the command for the next control period, at time ``now_s``.
+
+        ``locator_present``: whether a locator publishes targets (the
+        driver's node knows); until the first target, the search waits for one.
+        """
         now_s = float(now_s)
         with self._lock:
-            if self._start_s is None or now_s < self._start_s:
+            if self._start_s is None or now_s < self._start_s or (
+                    not locator_present and self._last_target_s is None):
                 self._start_s = now_s
             mode = self._mode_at(now_s)
             if mode != self._mode:

@@ -97,16 +97,20 @@ class HeadLoop:
     ``expected_rate_hz`` (the rate the caller runs cycles at) and
     ``stale_after_s`` tune :meth:`health`: a position older than
     ``stale_after_s`` (default three cycles at ``expected_rate_hz``, at
-    least 0.3 s; 1 s without a rate) is not fresh.
+    least 0.3 s; 1 s without a rate) is not fresh. ``locator_present``
+    tells whether a locator publishes targets (the controller's search
+    waits for one); None: always.
     """
 
     def __init__(self, camera: EviD31, controller: Optional[TrackingController],
                  clock: Callable[[], float] = time.time, zoom_every: int = 5,
                  refresh_s: float = 1.0, expected_rate_hz: Optional[float] = None,
-                 stale_after_s: Optional[float] = None) -> None:
+                 stale_after_s: Optional[float] = None,
+                 locator_present: Optional[Callable[[], bool]] = None) -> None:
         self.camera = camera
         self.controller = controller
         self.clock = clock
+        self.locator_present = locator_present
         self.zoom_every = max(1, int(zoom_every))
         self.refresh_s = refresh_s
         self.zoom_units = 0
@@ -155,7 +159,8 @@ class HeadLoop:
         if self.controller is not None and self._running is None:
             self.controller.on_head_state(reading.stamp_s, reading.pan, reading.tilt,
                                           reading.zoom_units)
-            command = self.controller.update(self.clock())
+            present = self.locator_present() if self.locator_present is not None else True
+            command = self.controller.update(self.clock(), present)
             self.mode = command.mode
             try:
                 self._command(command)

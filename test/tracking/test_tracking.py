@@ -397,6 +397,22 @@ def test_search_sweeps_after_no_target_and_stops_when_one_arrives():
     assert command.mode == MODE_TRACK
 
 
+def test_search_waits_for_a_locator_before_the_first_target():
+    # Nothing can see the card a sweep would show before a locator runs: the
+    # head stays, and search_after_s counts from the locator's arrival.
+    ctrl = controller()
+    for k in range(0, 121):
+        ctrl.on_head_state(k / 20.0, 0.0, 0.0)
+        command = ctrl.update(k / 20.0, locator_present=k < 0)
+    assert command.mode == MODE_HOLD and command.pan_steps == 0
+    for k in range(121, 241):
+        ctrl.on_head_state(k / 20.0, 0.0, 0.0)
+        command = ctrl.update(k / 20.0)
+        if k / 20.0 < 6.0 + 2.95:
+            assert command.mode == MODE_HOLD, k
+    assert command.mode == MODE_SEARCH
+
+
 @pytest.mark.parametrize('ahead_first, direction', [(True, 1), (False, -1)])
 def test_a_head_turned_aside_searches_back_through_straight_ahead_first(ahead_first, direction):
     ctrl = controller(search_ahead_first=ahead_first)

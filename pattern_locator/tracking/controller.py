@@ -143,8 +143,9 @@ class TrackingController:
     Without any target yet, the search starts ``search_after_s`` after the
     first update at which a locator is present (``update``'s
     ``locator_present``): before one runs nothing can see the card the
-    sweep would show, and the head is left where it is. All stamps are seconds on one clock (the images'). A head
-    reading more than the history (2 s) older than the newest one means the
+    sweep would show, and the head is left where it is. All stamps are
+    seconds on one clock (the images'). A head reading more than the
+    history (2 s) older than the newest one means the
     clock jumped back (a replayed bag, a restarted simulation): everything
     is forgotten. Thread-safe: the callbacks and :meth:`update` may run on
     different threads.

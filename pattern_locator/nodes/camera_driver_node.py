@@ -192,7 +192,8 @@ class CameraDriverNode(Node):
             self.create_subscription(CameraInfo, 'camera/camera_info', self._on_camera_info,
                                      qos_profile_sensor_data)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(PointStamped, 'pattern_locator/target', self._on_target, 10)
+        self._target_sub = self.create_subscription(PointStamped, 'pattern_locator/target',
+                                                    self._on_target, 10)
         self.create_subscription(Odometry, 'odom', self._on_odometry, qos_profile_sensor_data)
         self.create_service(Trigger, '~/home', lambda req, res: self._trigger('home', res))
         self.create_service(Trigger, '~/reset', lambda req, res: self._trigger('reset', res))
@@ -316,8 +317,12 @@ class CameraDriverNode(Node):
 
     def _locator_present(self) -> bool:
         """Return whether a locator publishes targets (the search waits for one)."""
+        # The subscription's own name: remapped, as count_publishers' argument is not.
+        sub = getattr(self, '_target_sub', None)
+        if sub is None:
+            return False
         try:
-            return self.count_publishers('pattern_locator/target') > 0
+            return self.count_publishers(sub.topic_name) > 0
         except Exception:  # noqa: B902 - the context shut down under the camera thread
             return True
 

@@ -354,8 +354,8 @@ class LocatorNode(Node):
             output_frame=p['output_frame'], fusion=p['fusion'],
             min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'],
             gates=gate_parameters(p), uncertainty=uncertainty_parameters(p))
-        # Compile (or load from numba's cache) the detector's passes now, not
-        # on the first camera frame; and check that it reads a drawn card.
+        # Every pass of the detector run once now (the compiled ones are loaded
+        # at import), not on the first camera frame; and a drawn card read.
         started = time.monotonic()
         read = self.localizer.locator.detector.warm_up()
         self.get_logger().info(f'detector ready in {time.monotonic() - started:.2f} s')

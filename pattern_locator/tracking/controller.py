@@ -178,6 +178,11 @@ class TrackingController:
         self._reset()
 
     @property
+    def has_target(self) -> bool:
+        """Return whether a target was ever taken (since the last reset)."""
+        return self._last_target_s is not None
+
+    @property
     def params(self) -> TrackingParams:
         """Return the settings."""
         return self._params

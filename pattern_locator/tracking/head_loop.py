@@ -159,7 +159,9 @@ class HeadLoop:
         if self.controller is not None and self._running is None:
             self.controller.on_head_state(reading.stamp_s, reading.pan, reading.tilt,
                                           reading.zoom_units)
-            present = self.locator_present() if self.locator_present is not None else True
+            # The graph is asked only until the first target: the answer matters only then.
+            present = (self.locator_present is None or self.controller.has_target
+                       or self.locator_present())
             command = self.controller.update(self.clock(), present)
             self.mode = command.mode
             try:

@@ -295,7 +295,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
      g.spread) = spot_kernels.first_pass(
         g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
         layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
-        pred, dot_image.white, dot_image.grid_step, quiet, core_margin,
+        dot_image.white_at(pred[:, 0], pred[:, 1]).astype(np.float32), quiet, core_margin,
         params.min_window_darkness, out.points, out.valid, out.peak, out.area, out.inside)
     g.sigma = sigma
 

@@ -209,24 +209,8 @@ def windows(index, scale, predicted, axes, semi, inverse):
 
 
 @numba.njit(cache=True, nogil=False)
-def _white_at(table, step, u, v):
-    """Bilinear look-up of the white grid at image point (u, v), as ``DotImage.white_at``."""
-    rows, cols = table.shape
-    gx = min(max((u + 0.5) / step - 0.5, 0.0), cols - 1.0)
-    gy = min(max((v + 0.5) / step - 0.5, 0.0), rows - 1.0)
-    x0 = min(int(gx), cols - 2) if cols > 1 else 0
-    y0 = min(int(gy), rows - 2) if rows > 1 else 0
-    fx = min(max(gx - x0, 0.0), 1.0)
-    fy = min(max(gy - y0, 0.0), 1.0)
-    x1 = min(x0 + 1, cols - 1)
-    y1 = min(y0 + 1, rows - 1)
-    return _F32((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
-                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
-
-
-@numba.njit(cache=True, nogil=False)
 def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
-               owner, half, resolution, major, minor, linv, predicted, white, grid_step, quiet,
+               owner, half, resolution, major, minor, linv, white_level, quiet,
                core_margin, min_darkness, points, valid, peak, area, inside):
     """
     Gather each window's pixels, take the first, generous centroid and test the dots.
@@ -239,10 +223,9 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     ``to_plane`` metres per source pixel; ``spots``, ``plane_xy``,
     ``major``, ``minor`` (image pixels) and ``linv`` (metres per image
     pixel) are per spot, ``spots`` indexing the layout's ``owner`` raster
-    (``half``, ``resolution``: its geometry). ``white`` is the image's
-    local white on a grid (``grid_step`` pixels a cell), read at the
-    spots' ``predicted`` centres (image pixels); ``quiet`` is the source's
-    noise.
+    (``half``, ``resolution``: its geometry). ``white_level`` (float32,
+    per spot) is the image's local white at the spot's predicted centre;
+    ``quiet`` is the source's noise.
 
     Writes the centre (image pixels), the tests, the peak darkness and the
     area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
@@ -272,7 +255,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         bx, by = base[k, 0], base[k, 1]
         # Darkness below the local white, less a floor that keeps paper
         # noise out.
-        level = _white_at(white, grid_step, predicted[i, 0], predicted[i, 1])
+        level = white_level[i]
         floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
         clear = level - floor
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])

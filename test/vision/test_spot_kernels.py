@@ -116,17 +116,6 @@ def test_windows_round_halves_to_even_as_numpy():
         assert np.allclose(to_plane, 0.001 * scale * axes)
 
 
-def test_white_is_read_as_the_dot_image_reads_it():
-    image = np.random.default_rng(8).integers(0, 256, (120, 160, 3), dtype=np.uint8)
-    dot_image = segment(image, DetectorParams(field='frame'))
-    u = np.array([-5.0, 0.0, 13.3, 80.5, 159.0, 170.0])
-    v = np.array([-3.0, 0.0, 7.7, 60.2, 119.0, 130.0])
-    want = dot_image.white_at(u, v).astype(np.float32)
-    got = [spot_kernels._white_at(dot_image.white, dot_image.grid_step, a, b)
-           for a, b in zip(u, v)]
-    assert np.array_equal(got, want)
-
-
 def first_pass(image, base, size, pred, semi=(3.0, 2.0)):
     """Run the first pass on windows at ``base`` (one spot per window, plane all its own)."""
     dot_image = segment(image, DetectorParams(field='frame'))
@@ -139,8 +128,8 @@ def first_pass(image, base, size, pred, semi=(3.0, 2.0)):
         eye.astype(np.float32), np.asarray(pred, float), np.tile(semi, (k, 1)),
         0.001 * eye.astype(np.float32), np.zeros(k, np.int64), np.zeros((k, 2)),
         np.zeros((1, 1), np.int16), 10.0, 100.0, np.full(k, 2.0), np.full(k, 1.5), 0.001 * eye,
-        np.asarray(pred, float) + base, dot_image.white, dot_image.grid_step, np.float32(1.0),
-        1.0, 0.12, *out)
+        dot_image.white_at(*(np.asarray(pred, float) + base).T).astype(np.float32),
+        np.float32(1.0), 1.0, 0.12, *out)
     return dot_image, result, out
 
 

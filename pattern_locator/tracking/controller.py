@@ -63,7 +63,7 @@ from typing import List, Optional, Sequence, Tuple
 from .history import AimTrack, BaseTrack, HeadHistory, HISTORY_S
 from .params import (PAN_MAX_STEPS, PAN_STEP_RAD_S, quantise_speed, step_range, TILT_MAX_STEPS,
                      TILT_STEP_RAD_S, TrackingParams)
-from .search import SearchSweep
+from .search import SEARCH_TILT_BAND_RAD, SearchSweep
 from .zoom import ZOOM_STOP, ZOOM_TELE_UNITS, ZOOM_WIDE_UNITS, ZoomControl
 
 __all__ = ['HeadCommand', 'MODE_HOLD', 'MODE_IDLE', 'MODE_SEARCH', 'MODE_TRACK', 'MODES',
@@ -460,6 +460,8 @@ class TrackingController:
     def _search(self, now_s: float) -> HeadCommand:
         pan, tilt = self._head_now(now_s)
         wanted, level = self._sweep.step(pan)
+        if abs(self._clamp(level, self._tilt.limits) - tilt) > SEARCH_TILT_BAND_RAD:
+            wanted = 0.0                              # the tilt first (search.py)
         pan_speed = self._pan.within_travel(pan, self._pan.nearest(wanted))
         tilt_speed = self._tilt.within_travel(tilt, self._axis_speed(self._tilt, level - tilt,
                                                                      0.0))

@@ -5,7 +5,11 @@ A sweep starts back through straight ahead when the head is turned aside
 (``search_ahead_first``: after the robot moved on, the next card is likelier
 ahead of it than where the last one was), else towards where the card was
 going or was. At each end of the pan travel (less a margin) it turns and
-moves on to the next of ``search_tilt_levels_rad``.
+moves on to the next of ``search_tilt_levels_rad``. The pan waits while the
+tilt is more than ``SEARCH_TILT_BAND_RAD`` from its level: a pass started
+while the tilt still climbs sweeps past a card above the old level unseen
+(the view leaves a card 6 deg aside in 0.6 s at 30 deg/s), and the next
+pass that could show it is a whole travel away.
 """
 
 import math
@@ -17,6 +21,9 @@ from .params import TrackingParams
 AHEAD_BAND_RAD = math.radians(15.0)
 # The search sweep turns back this far inside the pan limits.
 SEARCH_MARGIN_RAD = math.radians(2.0)
+# The pan waits while the tilt is further than this from its level (a tenth
+# of the EVI-D31's widest vertical view).
+SEARCH_TILT_BAND_RAD = math.radians(3.5)
 
 
 class SearchSweep:

@@ -436,9 +436,26 @@ def test_search_turns_at_the_travel_ends_and_changes_tilt_level():
     assert steps(command) == (6, 0)                   # left first, tilt level 0
     ctrl.on_head_state(3.05, 99 * DEG, 0.0)           # at the left end
     command = ctrl.update(3.05)
-    assert command.pan_steps == -6 and command.tilt_steps > 0
-    ctrl.on_head_state(3.1, 0.0, 15 * DEG)
+    assert command.pan_steps == 0 and command.tilt_steps > 0   # the tilt first
+    ctrl.on_head_state(3.1, 99 * DEG, 15 * DEG)
     assert steps(ctrl.update(3.1)) == (-6, 0)
+
+
+def test_search_pans_only_once_its_tilt_level_is_reached():
+    # A pass started while the tilt still climbs would sweep past a card
+    # above the old level before the view gets up to it.
+    ctrl = controller(search_tilt_levels_rad=(20 * DEG,))
+    assert ctrl.update(0.0).mode == MODE_IDLE
+    for k in range(61):
+        ctrl.on_head_state(k / 20.0, 0.0, 0.0)
+    command = ctrl.update(3.0)
+    assert command.mode == MODE_SEARCH
+    assert command.pan_steps == 0 and command.tilt_steps > 0
+    ctrl.on_head_state(3.05, 0.0, 10 * DEG)           # half way up: still waiting
+    assert ctrl.update(3.05).pan_steps == 0
+    ctrl.on_head_state(3.1, 0.0, 18 * DEG)            # within the band: the sweep goes
+    command = ctrl.update(3.1)
+    assert command.pan_steps == 6 and command.tilt_steps > 0
 
 
 def test_search_can_be_disabled():

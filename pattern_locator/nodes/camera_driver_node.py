@@ -70,6 +70,8 @@ from ..visca.protocol import ViscaError
 from ..visca.zoom_table import ZoomTable
 
 THROTTLE_S = 5.0
+# A target nearer than this to the camera has no direction worth turning to.
+MIN_TARGET_DISTANCE_M = 0.01
 CAMERA_INFO_HISTORY = 60
 BACKOFF_MAX_S = 5.0
 
@@ -275,9 +277,12 @@ class CameraDriverNode(Node):
         if not self._tracking_on:
             return
         point = (msg.point.x, msg.point.y, msg.point.z)
-        if not all_finite(point) or point[2] <= 0.0:
-            self.problems.report('target', f'ignored a target that is not a point in front of '
-                                 f'the camera: {quote(point)}')
+        distance = math.sqrt(sum(v * v for v in point)) if all_finite(point) else math.nan
+        # Any direction is a target: the gaze planner's handover to a card
+        # more than 90 deg off the axis lies behind the image plane (z <= 0).
+        if not distance >= MIN_TARGET_DISTANCE_M:
+            self.problems.report('target', f'ignored a target that is not a finite point away '
+                                 f'from the camera: {quote(point)}')
             return
         pan_error, tilt_error = head_motion_to_point(*point)
         # The card's apparent size: its outer ring's radius over its distance,
@@ -285,10 +290,10 @@ class CameraDriverNode(Node):
         focal = self._focal_by_stamp.get(stamp_key(msg.header.stamp), self._focal)
         size = None
         if focal is not None:
-            size = focal * self.card_radius_m / math.sqrt(sum(v * v for v in point))
+            size = focal * self.card_radius_m / distance
         self.targets += 1
         self.loop.on_target(stamp_seconds(msg.header.stamp), pan_error, tilt_error, size,
-                            math.sqrt(sum(v * v for v in point)))
+                            distance)
 
     def _on_odometry(self, msg: Odometry) -> None:
         q = msg.pose.pose.orientation

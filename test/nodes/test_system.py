@@ -31,10 +31,9 @@ def ros_node():
 
 def target_point(pan_error: float, tilt_error: float, distance: float = 3.0):
     """Return the optical-frame point (m) whose centring needs these head turns (REP 103)."""
-    x = -math.tan(pan_error)
-    y = -math.tan(tilt_error) * math.hypot(x, 1.0)
-    scale = distance / math.sqrt(x * x + y * y + 1.0)
-    return x * scale, y * scale, scale
+    horizontal = distance * math.cos(tilt_error)
+    return (-math.sin(pan_error) * horizontal, -math.sin(tilt_error) * distance,
+            math.cos(pan_error) * horizontal)
 
 
 def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, ros_node):
@@ -121,6 +120,10 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         aim(-0.2, 0.0, 2.0, info)
         assert camera.state().zoom_units > zoom + 100, (zoom, camera.state())
         assert params.set_value('zoom_control', False)[0]
+        # A card behind the image plane (the gaze planner's handover to a card
+        # more than 90 deg off the axis, z < 0): the head turns to it.
+        aim(1.6, 0.0, 3.0)
+        assert camera.state().pan_deg == pytest.approx(-math.degrees(1.6), abs=1.0)
 
         # Garbage on the line and a Network Change: joint states keep coming.
         camera.send_garbage(bytes([0x00, 0x13, 0x0D, 0x90, 0x41]))

@@ -427,8 +427,9 @@ class SimNode(Node):
         camera = self.zoom_table.camera_at(self._zoom_units)
         self._frames += 1
         began = time.perf_counter()
-        frame = self.sim.frame(t, lambda x: self._head_at(x + origin), camera,
-                               seed=self.params['seed'] * 100_003 + self._frames)
+        head_at = lambda x: self._head_at(x + origin)  # noqa: E731
+        image, blurs = self.sim.render(t, head_at, camera,
+                                       seed=self.params['seed'] * 100_003 + self._frames)
         self._render_ms.append((time.perf_counter() - began) * 1e3)
         del self._render_ms[:-RENDER_HISTORY]
         stamp = self._time_msg(self._stamp_ns(origin + t))
@@ -437,11 +438,12 @@ class SimNode(Node):
         fill_camera_info(info, camera)
         info.header.stamp, info.header.frame_id = stamp, name
         msg = Image()
-        fill_msg(msg, frame.image, 'bgr8')
+        fill_msg(msg, image, 'bgr8')
         msg.header.stamp, msg.header.frame_id = stamp, name
         self.pub_info.publish(info)
         self.pub_image.publish(msg)
-        self._publish_truth(stamp, frame.truth)
+        # The truth after the image: its cost is not the image's latency.
+        self._publish_truth(stamp, self.sim.truth(t, head_at, camera, blurs))
 
     def _publish_truth(self, stamp, truth: FrameTruth) -> None:
         if truth.room is not None:

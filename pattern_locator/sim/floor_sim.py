@@ -304,13 +304,23 @@ class FloorSim:
 
     def frame(self, t: float, head_at: HeadAt, camera: CameraModel, seed: int = 0) -> SimFrame:
         """Return the frame stamped ``t`` (the middle of its exposure) and its truth."""
+        image, blurs = self.render(t, head_at, camera, seed)
+        return SimFrame(image, self.truth(t, head_at, camera, blurs))
+
+    def render(self, t: float, head_at: HeadAt, camera: CameraModel, seed: int = 0
+               ) -> Tuple[np.ndarray, dict]:
+        """
+        Return the image stamped ``t`` and its cards' blurs (for :meth:`truth`).
+
+        Apart from the truth so that a node can send the image first: the
+        truth's views cost milliseconds that would add to every image's latency.
+        """
         fields = []
         for start, end in self.exposure.windows(t):
             middle = (start + end) / 2.0
             fields.append(Field(*(self.scene.true_camera_pose(self._base_pose(x, t), *head_at(x))
                                   for x in (start, middle, end))))
-        image, blurs = self.scene.render(camera, fields, seed, self.exposure.blur)
-        return SimFrame(image, self.truth(t, head_at, camera, blurs))
+        return self.scene.render(camera, fields, seed, self.exposure.blur)
 
     def truth(self, t: float, head_at: HeadAt, camera: CameraModel,
               blurs: Optional[dict] = None) -> FrameTruth:

@@ -851,12 +851,14 @@ class LocatorNode(Node):
             problem = _unpublishable(fix, covariance, ids)
             if problem:
                 self.problems.report(f'rejected: {problem}', f'fix not published: {problem}')
-                fix = None
             else:
                 # Carried forward from here by odometry (odom_bridged, the gaze).
                 self.bridge.update(fix, stamp)
                 self._fix_frame = self.building.room(ids[0], ids[1]).frame
                 self._fix_room = (ids[0], ids[1])
+                # The fix first: the target's choice and the debug image cost
+                # milliseconds that would add to its latency.
+                self._publish_fix(header, fix, covariance, ids, with_odometry)
         choice = self._choose_target(result, camera, motion, stamp, twist)
         self._count_target(choice)
         if choice.point is not None:
@@ -871,8 +873,10 @@ class LocatorNode(Node):
                                      'no target published: the card centre is not finite')
         if self.pub_debug.get_subscription_count() > 0:
             self._publish_debug(msg, result, image)
-        if fix is None:
-            return
+
+    def _publish_fix(self, header, fix, covariance: np.ndarray, ids: Tuple[int, ...],
+                     with_odometry: bool) -> None:
+        """Publish a fix: its ids, its pose with covariance, its pose."""
         with self._stats_lock:
             self.stats['located'] += 1
             if with_odometry:

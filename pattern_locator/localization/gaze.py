@@ -34,6 +34,10 @@ kept while it stays predicted visible ``lookahead_s`` ahead (the base's
 twist carried forward) and no other card scores better than
 ``switch_ratio`` times its score; when it is about to leave the view the
 best card visible both now and then takes over, before it leaves.
+**Ahead**: when no card is predicted visible now but one is from the pose
+``lookahead_s`` ahead (the robot about to pass a door or a corner), the
+head aims at that card now, from where the robot is, so that it is centred
+when it comes into sight instead of searched for after.
 
 :func:`feed_forward_rates` gives the head rates that cancel the base's
 motion for a target fixed in the world: what the tracking controller adds
@@ -55,7 +59,7 @@ from ..errors import ConfigError
 from ..vision.geometry import Pose, rodrigues
 
 IdsKey = Tuple[int, int, int]
-REASONS = ('new', 'keep', 'better', 'handover')
+REASONS = ('new', 'keep', 'better', 'handover', 'ahead')
 
 
 @dataclass(frozen=True)
@@ -111,8 +115,10 @@ class GazeChoice:
     The card to look at: its option, why (:data:`REASONS`), and whether it stays in view.
 
     ``reason``: ``new`` (no current card, or it was not visible), ``keep``,
-    ``better`` (another card scores much better) or ``handover`` (the
-    current card leaves the view within the lookahead). ``visible_ahead``:
+    ``better`` (another card scores much better), ``handover`` (the
+    current card leaves the view within the lookahead) or ``ahead`` (none
+    is visible now; this one will be, from the pose the lookahead gives:
+    aimed at from here). ``visible_ahead``:
     the chosen card is predicted visible ``lookahead_s`` ahead too.
     """
 
@@ -277,7 +283,7 @@ class GazePlanner:
                room_hint: Optional[Tuple[int, int]] = None,
                exclude: Collection[IdsKey] = ()) -> Optional[GazeChoice]:
         """
-        Return the card to look at from ``T_building_base``, or None if none is predicted visible.
+        Return the card to look at from ``T_building_base``; None: none visible now or ahead.
 
         ``current_card``: the ids the head looks at now (for handover and
         hysteresis); ``twist``: the base's (for the lookahead); ``head_pan``:
@@ -289,12 +295,16 @@ class GazePlanner:
         p = self.parameters
         exclude = {tuple(e) for e in exclude}
         now = self.options(T_building_base, room_hint, exclude, head_pan)
-        if not now:
-            return None
-        ahead_ids = {o.ids.as_tuple() for o in now}
+        ahead_pose = None
         if twist is not None and p.lookahead_s > 0.0 and (
                 twist.speed_m_s > 1e-3 or abs(twist.yaw_rate_rad_s) > 1e-3):
             ahead_pose = T_building_base @ _moved(twist, p.lookahead_s)
+        if not now:
+            if ahead_pose is None:
+                return None
+            return self._ahead(T_building_base, self.options(ahead_pose, room_hint, exclude))
+        ahead_ids = {o.ids.as_tuple() for o in now}
+        if ahead_pose is not None:
             ahead_ids = {o.ids.as_tuple() for o in self.options(ahead_pose, room_hint, exclude)}
         staying = [o for o in now if o.ids.as_tuple() in ahead_ids]
         current = None
@@ -313,6 +323,24 @@ class GazePlanner:
         if others and others[0].score < p.switch_ratio * current.score:
             return GazeChoice(others[0], 'better', True)
         return GazeChoice(current, 'keep', True)
+
+    def _ahead(self, T_building_base: Pose, ahead: Sequence[CardOption]
+               ) -> Optional[GazeChoice]:
+        """Return the best card visible from the pose ahead, aimed at from here (or None)."""
+        head = self.head
+        (pan_lo, pan_hi), (tilt_lo, tilt_hi) = head.pan_limits_rad, head.tilt_limits_rad
+        T_base_building = T_building_base.inverse()
+        for option in ahead:
+            centre = self.building.card(option.ids).T_building_card.t
+            try:
+                pan, tilt = head.aim_angles(T_base_building.apply(centre[None])[0])
+            except ValueError:
+                continue
+            if pan_lo <= pan <= pan_hi and tilt_lo <= tilt <= tilt_hi:
+                return GazeChoice(CardOption(option.ids, pan, tilt, option.distance_m,
+                                             option.view_angle_deg, option.score),
+                                  'ahead', True)
+        return None
 
 
 def _moved(twist: BaseTwist, duration_s: float, steps: int = 8) -> Pose:

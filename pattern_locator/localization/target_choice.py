@@ -23,9 +23,12 @@ the base's twist, and returns a :class:`TargetChoice`:
   **predicted** in the optical frame from the pose, the map and the head's
   angles at the image's stamp (``source 'predicted'``); so the head turns
   to the next card before the current one leaves the view;
-* no card predicted visible: the card seen (``'unpredicted'``: the
-  map-based planner is conservative, e.g. a card seen through a door),
-  else **no target** (``'none predicted'``): the driver searches.
+* no card predicted visible now: the card seen (``'unpredicted'``: the
+  map-based planner is conservative, e.g. a card seen through a door);
+  none seen: the planner's card that will be visible ``lookahead_s``
+  ahead (``'ahead'``, predicted: the head turns to where it will appear,
+  e.g. through the door the robot drives to; not counted missing), else
+  **no target** (``'none predicted'``): the driver searches.
 
 A predicted card that should be well inside the image but is not detected
 in ``missing_frames`` images running (hidden by something the map does not
@@ -194,7 +197,8 @@ class TargetChooser:
             current = next(iter(by_ids))      # the biggest card seen that the map knows
         choice = self.planner.choose(T_building_base, current, twist, head_pan=pan,
                                      room_hint=room_hint, exclude=tuple(self._excluded))
-        if choice is None:
+        if choice is None or (choice.reason == 'ahead' and seen):
+            # A card in the image gives fixes now; one ahead only once in sight.
             card = by_ids.get(current) if current is not None else None
             if card is None and seen:
                 card = seen[0]
@@ -209,7 +213,8 @@ class TargetChooser:
             return TargetChoice(_point(by_ids[ids].centre), ids, 'seen', choice.reason,
                                 choice.visible_ahead)
         point = self.predicted_centre(ids, T_building_base, pan, tilt)
-        self._count_miss(ids, point, camera, stamp_s)
+        if choice.reason != 'ahead':          # not in sight yet: not missing
+            self._count_miss(ids, point, camera, stamp_s)
         return TargetChoice(_point(point), ids, 'predicted', choice.reason,
                             choice.visible_ahead)
 

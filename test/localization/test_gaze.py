@@ -57,8 +57,8 @@ def test_every_choice_along_the_tour_is_a_card_the_walls_leave_in_sight():
         seen = scene.oracle_gaze(state.pose) is not None
         oracle += seen
         current = None if choice is None else choice.ids
-        if choice is None:
-            continue
+        if choice is None or choice.reason == 'ahead':
+            continue                  # 'ahead': not in sight yet (the next test)
         chosen += 1
         both += seen
         pan, tilt = choice.pan, choice.tilt
@@ -85,6 +85,27 @@ def test_a_card_in_another_room_is_never_chosen_through_the_wall():
     # In the corridor by room 3's wall: room 3's cards are not predicted.
     T = pose(6.0, 6.9, 90.0)
     assert all((o.ids.floor, o.ids.room) != (4, 3) for o in PLANNER.options(T))
+
+
+def test_leaving_a_room_the_head_turns_to_the_card_beyond_the_door_before_it_shows():
+    # In room 3 by its door, driving south into the corridor: no card is in
+    # sight now, one will be through the door 1.5 s on. The head aims at it
+    # from here, so that it is centred when it comes into view.
+    T, twist = pose(9.0, 7.5, -90.0), BaseTwist((0.3, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert PLANNER.options(T) == []
+    choice = PLANNER.choose(T, None, twist)
+    assert choice is not None and choice.reason == 'ahead'
+    assert (choice.ids.floor, choice.ids.room) != (4, 3)
+    assert HEAD.within_limits(choice.pan, choice.tilt)
+    ahead = pose(9.0, 7.5 - 0.3 * PLANNER.parameters.lookahead_s, -90.0)
+    centre = BUILDING.card(choice.ids).T_building_card.t[None]
+    pan_then, tilt_then = HEAD.aim_angles(ahead.inverse().apply(centre)[0])
+    assert truly_visible(ahead, choice.ids.as_tuple(), pan_then, tilt_then)
+    # Aimed at from here, it is then well inside the 48.8 deg wide view.
+    assert abs(pan_then - choice.pan) < math.radians(15.0)
+    assert abs(tilt_then - choice.tilt) < math.radians(10.0)
+    # Standing still there: nothing to look at, search.
+    assert PLANNER.choose(T, None) is None
 
 
 def test_in_a_doorway_both_rooms_count():

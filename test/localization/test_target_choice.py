@@ -120,13 +120,29 @@ def test_no_target_when_no_card_is_predicted_visible():
     # can reach is predicted visible).
     chooser = TargetChooser(BUILDING, HEAD)
     T = pose(22.3, 15.2, 0.0)
-    choice = chooser.choose(0.0, [], T, 0.0, 0.0, WEST, camera=CAMERA)
+    choice = chooser.choose(0.0, [], T, 0.0, 0.0, None, camera=CAMERA)
     assert (choice.point, choice.ids, choice.source, choice.reason) == (
         None, None, 'none', 'none predicted')
     # A card seen all the same (the planner is conservative) stays the target.
     seen = [SeenCard((4, 9, 1), (0.2, -0.3, 9.0))]
     choice = chooser.choose(0.2, seen, T, 0.0, 0.0, WEST, camera=CAMERA)
     assert (choice.ids, choice.source, choice.reason) == ((4, 9, 1), 'seen', 'unpredicted')
+
+
+def test_driving_to_a_door_the_target_is_the_card_beyond_it_never_counted_missing():
+    # In room 6, driving out through its east door: nothing in sight now, a
+    # corridor card will be. The head is sent to it (predicted), and images
+    # that cannot show it yet (the wall) never leave it out as missing.
+    chooser = TargetChooser(BUILDING, HEAD, parameters=TargetParameters(missing_frames=2))
+    T = pose(22.3, 15.2, 0.0)
+    for k in range(5):
+        choice = chooser.choose(0.1 * k, [], T, 0.0, 0.0, WEST, camera=CAMERA)
+        assert (choice.source, choice.reason) == ('predicted', 'ahead'), k
+        assert choice.ids[:2] != (4, 6)
+        pan, tilt = HEAD.aim_angles(T.inverse().apply(
+            BUILDING.card(choice.ids).T_building_card.t[None])[0])
+        assert -math.atan2(choice.point[0], choice.point[2]) == pytest.approx(pan, abs=0.05)
+    assert chooser.excluded == ()
 
 
 def test_a_predicted_card_missing_from_the_images_is_left_out_for_a_while():

@@ -64,6 +64,7 @@ from ..localization.odom import BaseTwist, OdomBridge, OdomBuffer
 from ..localization.target_choice import biggest_seen, seen_cards, TargetChooser
 from ..localization.uncertainty import chi2_95, UncertaintyParameters
 from ..sim.floor_sim import Exposure, FloorSim
+from ..tracking.controller import pan_aim_in_travel
 from ..visca.zoom_table import ZoomTable
 from ..vision.geometry import Pose, rotation_vector
 
@@ -357,7 +358,9 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
         except ValueError:
             pass
     gain = 3.0
-    pan_rate = ff_pan + gain * _wrap(choice.pan - pan_now)
+    # Both within the travel (less than a turn): the plain difference is the
+    # way the head can go; a wrapped one could point through the stop.
+    pan_rate = ff_pan + gain * (choice.pan - pan_now)
     tilt_rate = ff_tilt + gain * (choice.tilt - tilt_now)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
                      _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
@@ -366,7 +369,7 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
                                        / card_size)
     fx_now = zoom_table.camera_at(zoom).fx
     fx_wanted = zoom_table.camera_at(wanted).fx
-    off_axis = math.hypot(_wrap(choice.pan - pan_now), choice.tilt - tilt_now)
+    off_axis = math.hypot((choice.pan - pan_now), choice.tilt - tilt_now)
     if off_axis > math.radians(5.0):
         wanted, fx_wanted = 0.0, zoom_table.camera_at(0.0).fx      # find it wide first
     if abs(math.log(fx_wanted / fx_now)) > math.log(1.25):
@@ -405,7 +408,7 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
         return zoom, search_dir
     point, pan_s, tilt_s = target.target
     x, y, z = point
-    aim_pan = pan_s - math.atan2(x, z)
+    aim_pan = pan_aim_in_travel(pan_s - math.atan2(x, z), head.pan_limits_rad)
     aim_tilt = tilt_s - math.atan2(y, math.hypot(x, z))
     ff_pan = ff_tilt = 0.0
     twist = odom.twist_at(t - 0.02) if odom is not None else None
@@ -417,7 +420,7 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
             pass
     aim_pan, aim_tilt = head.clamp(aim_pan + ff_pan * age, aim_tilt + ff_tilt * age)
     gain = 3.0
-    pan_rate = ff_pan + gain * _wrap(aim_pan - pan_now)
+    pan_rate = ff_pan + gain * (aim_pan - pan_now)
     tilt_rate = ff_tilt + gain * (aim_tilt - tilt_now)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
                      _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
@@ -425,15 +428,11 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
     wanted = zoom_table.zoom_for_focal(0.25 * zoom_table.width * distance / card_size)
     fx_now = zoom_table.camera_at(zoom).fx
     fx_wanted = zoom_table.camera_at(wanted).fx
-    if math.hypot(_wrap(aim_pan - pan_now), aim_tilt - tilt_now) > math.radians(5.0):
+    if math.hypot((aim_pan - pan_now), aim_tilt - tilt_now) > math.radians(5.0):
         wanted, fx_wanted = 0.0, zoom_table.camera_at(0.0).fx      # find it wide first
     if abs(math.log(fx_wanted / fx_now)) > math.log(1.25):
         zoom = float(wanted)
     return zoom, search_dir
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _locate(frame, camera, stamp: float, localizer: RobotLocalizer, joints: JointStateBuffer,

@@ -299,18 +299,24 @@ class GazePlanner:
         if twist is not None and p.lookahead_s > 0.0 and (
                 twist.speed_m_s > 1e-3 or abs(twist.yaw_rate_rad_s) > 1e-3):
             ahead_pose = T_building_base @ _moved(twist, p.lookahead_s)
+        key = None
+        if current_card is not None:
+            key = tuple(int(v) for v in (current_card.as_tuple() if isinstance(current_card, Ids)
+                                         else current_card))
         if not now:
             if ahead_pose is None:
                 return None
-            return self._ahead(T_building_base, self.options(ahead_pose, room_hint, exclude))
+            ahead = self.options(ahead_pose, room_hint, exclude)
+            # The card aimed at ahead already stays the one (no flip-flop
+            # between two cards while the door comes nearer).
+            ahead.sort(key=lambda o: o.ids.as_tuple() != key)
+            return self._ahead(T_building_base, ahead)
         ahead_ids = {o.ids.as_tuple() for o in now}
         if ahead_pose is not None:
             ahead_ids = {o.ids.as_tuple() for o in self.options(ahead_pose, room_hint, exclude)}
         staying = [o for o in now if o.ids.as_tuple() in ahead_ids]
         current = None
-        if current_card is not None:
-            key = tuple(int(v) for v in (current_card.as_tuple() if isinstance(current_card, Ids)
-                                         else current_card))
+        if key is not None:
             current = next((o for o in now if o.ids.as_tuple() == key), None)
         if current is None:
             best = staying[0] if staying else now[0]

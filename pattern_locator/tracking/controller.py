@@ -78,6 +78,20 @@ MODE_IDLE = 'idle'
 MODES = (MODE_TRACK, MODE_HOLD, MODE_SEARCH, MODE_IDLE)
 
 
+def pan_aim_in_travel(aim: float, limits: Tuple[float, float]) -> float:
+    """
+    Return the pan aim (rad), a whole turn either way, that the travel reaches or comes nearest.
+
+    A target's turn is measured within +-180 deg of the head's pan, so a card
+    just past 180 deg to one side reads as just under 180 to the other: a
+    head at +80 deg with a card at -98 deg (travel +-100) must go right, not
+    left to its limit.
+    """
+    lo, hi = limits
+    return min((aim, aim - 2.0 * math.pi, aim + 2.0 * math.pi),
+               key=lambda a: max(lo - a, a - hi, 0.0))
+
+
 @dataclass(frozen=True)
 class HeadCommand:
     """
@@ -288,7 +302,8 @@ class TrackingController:
             if self._aims and stamp_s <= self._aims.newest[0]:
                 return False
             head_pan, head_tilt = self._head.at(stamp_s)
-            aim = (self._clamp(head_pan + float(pan_error), self._pan.limits),
+            aim = (self._clamp(pan_aim_in_travel(head_pan + float(pan_error), self._pan.limits),
+                               self._pan.limits),
                    self._clamp(head_tilt + float(tilt_error), self._tilt.limits))
             in_odom = self._odometry_at(stamp_s)
             if in_odom != self._aims_in_odom:

@@ -104,6 +104,11 @@ def test_leaving_a_room_the_head_turns_to_the_card_beyond_the_door_before_it_sho
     # Aimed at from here, it is then well inside the 48.8 deg wide view.
     assert abs(pan_then - choice.pan) < math.radians(15.0)
     assert abs(tilt_then - choice.tilt) < math.radians(10.0)
+    # The card aimed at ahead stays the one while another would score better.
+    others = [o for o in PLANNER.options(ahead) if o.ids != choice.ids]
+    assert others
+    kept = PLANNER.choose(T, others[0].ids, twist)
+    assert kept.ids == others[0].ids and kept.reason == 'ahead'
     # Standing still there: nothing to look at, search.
     assert PLANNER.choose(T, None) is None
 

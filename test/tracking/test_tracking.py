@@ -7,10 +7,10 @@ from typing import Callable, List, Optional, Tuple
 
 from pattern_locator.errors import ConfigError
 from pattern_locator.tracking.controller import (HeadCommand, MODE_HOLD, MODE_IDLE, MODE_SEARCH,
-                                                 MODE_TRACK, PAN_MAX_STEPS, PAN_STEP_RAD_S,
-                                                 quantise_speed, TILT_MAX_STEPS, TILT_STEP_RAD_S,
-                                                 TrackingController, TrackingParams,
-                                                 ZOOM_TELE_UNITS)
+                                                 MODE_TRACK, pan_aim_in_travel, PAN_MAX_STEPS,
+                                                 PAN_STEP_RAD_S, quantise_speed, TILT_MAX_STEPS,
+                                                 TILT_STEP_RAD_S, TrackingController,
+                                                 TrackingParams, ZOOM_TELE_UNITS)
 import pytest
 
 DEG = math.pi / 180.0
@@ -456,6 +456,23 @@ def test_search_pans_only_once_its_tilt_level_is_reached():
     ctrl.on_head_state(3.1, 0.0, 18 * DEG)            # within the band: the sweep goes
     command = ctrl.update(3.1)
     assert command.pan_steps == 6 and command.tilt_steps > 0
+
+
+def test_a_card_just_past_half_a_turn_is_reached_the_way_the_travel_allows():
+    # Head at 85 deg left; the card 98 deg right: 183 deg to the right, which
+    # the target's direction reads as 177 deg to the left (past the stop).
+    ctrl = controller()
+    for k in range(21):
+        ctrl.on_head_state(k / 20.0, 85 * DEG, 0.0)
+    assert ctrl.on_target(1.0, 177 * DEG, 0.0)
+    command = ctrl.update(1.0)
+    assert command.mode == MODE_TRACK and command.pan_steps < 0      # right
+    assert command.pan_error == pytest.approx(-183 * DEG, abs=0.01)
+    assert pan_aim_in_travel(262 * DEG, (-100 * DEG, 100 * DEG)) == pytest.approx(-98 * DEG)
+    assert pan_aim_in_travel(50 * DEG, (-100 * DEG, 100 * DEG)) == 50 * DEG
+    # Beyond the travel either way: the nearer stop.
+    assert pan_aim_in_travel(-150 * DEG, (-100 * DEG, 100 * DEG)) == -150 * DEG
+    assert pan_aim_in_travel(-250 * DEG, (-100 * DEG, 100 * DEG)) == pytest.approx(110 * DEG)
 
 
 def test_search_can_be_disabled():

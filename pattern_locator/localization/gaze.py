@@ -33,7 +33,11 @@ per radian the head must turn to it. **Handover**: the current card is
 kept while it stays predicted visible ``lookahead_s`` ahead (the base's
 twist carried forward) and no other card scores better than
 ``switch_ratio`` times its score; when it is about to leave the view the
-best card visible both now and then takes over, before it leaves.
+best card visible both now and then takes over, before it leaves. A card
+is taken (new, handover, better) only if it is still predicted visible
+when the head has turned to it at ``slew_rate_deg_s`` and ``min_dwell_s``
+after: leaving a room, a card on the far wall 180 degrees round is gone by
+the time a 2.3 s slew gets there.
 **Ahead**: when no card is predicted visible now but one is from the pose
 ``lookahead_s`` ahead (the robot about to pass a door or a corner), the
 head aims at that card now, from where the robot is, so that it is centred
@@ -59,6 +63,8 @@ from ..errors import ConfigError
 from ..vision.geometry import Pose, rodrigues
 
 IdsKey = Tuple[int, int, int]
+# Poses ahead at which a slewed-to card must still be in sight: on this grid (s).
+LASTS_STEP_S = 0.25
 REASONS = ('new', 'keep', 'better', 'handover', 'ahead')
 
 
@@ -85,6 +91,10 @@ class GazeParameters:
     # over 80 deg/s: 3 m/rad found 0.2-0.7 points of fix coverage more than
     # 1 on the loop route (bench --drive-core, target driver, seeds 1-2).
     slew_weight_m_per_rad: float = 3.0
+    # A card is worth turning to only if it is still in sight when the head
+    # gets there (at this pan speed, the EVI-D31's fastest) and this long after.
+    slew_rate_deg_s: float = 80.0
+    min_dwell_s: float = 0.5
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -348,15 +358,44 @@ class GazePlanner:
         current = None
         if key is not None:
             current = next((o for o in now if o.ids.as_tuple() == key), None)
+        later: Dict[float, set] = {}
+
+        def lasts(option: CardOption) -> bool:
+            """Whether the card is still in sight once the head has turned to it, and a dwell."""
+            if ahead_pose is None or head_pan is None or p.slew_rate_deg_s <= 0.0:
+                return True
+            horizon = (abs(option.pan - head_pan) / math.radians(p.slew_rate_deg_s)
+                       + p.min_dwell_s)
+            if horizon <= p.lookahead_s and option.ids.as_tuple() in ahead_ids:
+                return True
+            horizon = math.ceil(horizon / LASTS_STEP_S) * LASTS_STEP_S
+            if horizon not in later:
+                options = self.options(T_building_base @ _moved(twist, horizon), room_hint,
+                                       exclude)
+                later[horizon] = {o.ids.as_tuple() for o in options}
+            return option.ids.as_tuple() in later[horizon]
+
         if current is None:
-            best = staying[0] if staying else now[0]
-            return GazeChoice(best, 'new', bool(staying))
+            best = next((o for o in staying if lasts(o)), None)
+            if best is not None:
+                return GazeChoice(best, 'new', True)
+            best = next((o for o in now if lasts(o)), None)
+            if best is not None:
+                return GazeChoice(best, 'new', False)
+            if ahead_pose is not None:
+                # Every card in sight now is gone before the head gets there.
+                choice = self._ahead(T_building_base, self.options(ahead_pose, room_hint,
+                                                                   exclude))
+                if choice is not None:
+                    return choice
+            return GazeChoice(now[0], 'new', bool(staying))
         others = [o for o in staying if o.ids != current.ids]
         if current.ids.as_tuple() not in ahead_ids:
-            if others:
-                return GazeChoice(others[0], 'handover', True)
+            other = next((o for o in others if lasts(o)), None)
+            if other is not None:
+                return GazeChoice(other, 'handover', True)
             return GazeChoice(current, 'keep', False)
-        if others and others[0].score < p.switch_ratio * current.score:
+        if others and others[0].score < p.switch_ratio * current.score and lasts(others[0]):
             return GazeChoice(others[0], 'better', True)
         return GazeChoice(current, 'keep', True)
 

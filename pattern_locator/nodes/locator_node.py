@@ -244,6 +244,9 @@ _GAZE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
     'view_weight': ('weight of obliquity in the score (distance x (1 + w (1 / cos(view) - 1)))',
                     0.0, 100.0),
     'slew_weight_m_per_rad': ('score added per radian the head must turn (m/rad)', 0.0, 100.0),
+    'slew_rate_deg_s': ("the head's pan speed in a slew: a card is taken only if still in sight "
+                        'when the head gets there (deg/s; 0: not checked)', 0.0, 1000.0),
+    'min_dwell_s': ('... and this long after (s)', 0.0, 60.0),
 }
 
 # Groups of parameters declared from a core's dataclass, one per field.

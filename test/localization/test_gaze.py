@@ -113,6 +113,22 @@ def test_leaving_a_room_the_head_turns_to_the_card_beyond_the_door_before_it_sho
     assert PLANNER.choose(T, None) is None
 
 
+def test_no_handover_to_a_card_gone_before_the_head_gets_there():
+    # Driving south out of room 3, the head 91 deg left on card 5, which
+    # leaves the view within the lookahead. Card 6 on the far wall is in sight
+    # for 2.25 s more, and the head needs 2.3 s to turn 181 deg to it: keep
+    # card 5 while it lasts (the card beyond the door comes next, 'ahead').
+    T, twist = pose(9.0, 8.27, -90.0), BaseTwist((0.3, 0.0, 0.0), (0.0, 0.0, 0.0))
+    current = next(o for o in PLANNER.options(T) if o.ids.as_tuple() == (4, 3, 5))
+    choice = PLANNER.choose(T, current.ids, twist, head_pan=current.pan)
+    assert (choice.ids.as_tuple(), choice.reason, choice.visible_ahead) == (
+        (4, 3, 5), 'keep', False)
+    # Without the check (slew_rate_deg_s 0) that card is taken.
+    unchecked = GazePlanner(BUILDING, parameters=GazeParameters(slew_rate_deg_s=0.0))
+    handed = unchecked.choose(T, current.ids, twist, head_pan=current.pan)
+    assert (handed.ids.as_tuple(), handed.reason) == ((4, 3, 6), 'handover')
+
+
 def test_in_a_doorway_both_rooms_count():
     rooms, doorway = PLANNER.rooms_at(pose(9.0, 7.4, 90.0))       # room 3's door
     assert doorway and set(rooms) == {(4, 3), (4, 9)}

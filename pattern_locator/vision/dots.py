@@ -25,6 +25,7 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
+from . import dot_kernels
 from .detector_params import DetectorParams
 from ..errors import ImageError
 
@@ -88,20 +89,13 @@ class DotImage:
     _cache: dict = dataclass_field(default_factory=dict, repr=False, compare=False)
 
     def _grid(self, table: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        gx = np.clip((np.asarray(u, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
-                     0, table.shape[1] - 1)
-        gy = np.clip((np.asarray(v, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
-                     0, table.shape[0] - 1)
-        x0 = np.minimum(gx.astype(np.intp), table.shape[1] - 2) if table.shape[1] > 1 else \
-            np.zeros_like(gx, dtype=np.intp)
-        y0 = np.minimum(gy.astype(np.intp), table.shape[0] - 2) if table.shape[0] > 1 else \
-            np.zeros_like(gy, dtype=np.intp)
-        fx = np.clip(gx - x0, 0.0, 1.0)
-        fy = np.clip(gy - y0, 0.0, 1.0)
-        x1 = np.minimum(x0 + 1, table.shape[1] - 1)
-        y1 = np.minimum(y0 + 1, table.shape[0] - 1)
-        return ((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
-                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+        """Bilinear look-up of a grid at image points (1-D, or any shape: the result's)."""
+        u = np.asarray(u, dtype=np.float64)
+        shape = u.shape
+        out = dot_kernels.bilinear(table, np.ascontiguousarray(u.ravel()),
+                                   np.ascontiguousarray(np.asarray(v, dtype=np.float64).ravel()),
+                                   self.grid_step)
+        return out.reshape(shape)
 
     def _full_threshold(self) -> np.ndarray:
         """Return the dot threshold at full resolution (made once, when first needed)."""
@@ -267,21 +261,13 @@ def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
     h, w = mask.shape
-    area = stats[:, cv2.CC_STAT_AREA]
-    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     # Round dots fill a good part of their box and are not long and thin (a
     # 75-degree tilt makes a dot about 4:1); a dot cut by the border has a
-    # false centre.
-    keep = ((area <= max_area) & (area * 4 >= bw * bh)
-            & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
-            & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
-    keep[0] = False
-    idx = np.flatnonzero(keep)
+    # false centre. (dot_kernels.dot_components: the tests and the centres.)
+    idx, u, v = dot_kernels.dot_components(stats, centroids, int(scale), int(origin[0]),
+                                           int(origin[1]), float(max_area), h, w)
     s = float(scale)
-    u = origin[0] + s * (centroids[idx, 0] + 0.5) - 0.5
-    v = origin[1] + s * (centroids[idx, 1] + 0.5) - 0.5
-    return Blobs(u, v, area[idx].astype(float) * s * s, stats[idx, :4].copy(),
+    return Blobs(u, v, stats[idx, cv2.CC_STAT_AREA].astype(float) * s * s, stats[idx, :4],
                  idx.astype(np.int32), labels, scale, origin)
 
 
@@ -303,27 +289,14 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     Measured on every sixteenth column, in tiles, so that one small card
     moving against a still background is enough.
     """
-    g = image[:, ::16, 1] if image.ndim == 3 else image[:, ::16]
-    g = g.astype(np.int16)
-    h = (g.shape[0] - 4) // 2 * 2
-    if h < 2 * tile_rows:
-        return False
-    mid = g[2:2 + h]
-    one = np.abs(2 * mid - g[1:1 + h] - g[3:3 + h])
-    two = np.abs(2 * mid - g[0:h] - g[4:4 + h])
-    rows = h // tile_rows * tile_rows
-    cols = one.shape[1] // 4 * 4
-    if cols == 0:
-        return False
-    # Tile sums: rows first (contiguous), then groups of four columns.
-    t1, t2 = (c[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols).sum(
-        axis=1, dtype=np.int32).reshape(rows // tile_rows, cols // 4, 4).sum(axis=2)
-        for c in (one, two))
-    pixels = tile_rows * 4
-    # A tile counts when its one-row curvature is strong (6 levels a pixel on
-    # average) and three times its two-row curvature.
-    strong = (t1 > 6 * pixels) & (t1 > 3 * t2)
-    return int(np.count_nonzero(strong)) >= 2
+    # Per tile of `tile_rows` rows and four sampled columns of the green
+    # channel, the curvature over one row and over two, summed
+    # (dot_kernels.combed_tiles): a tile counts when its one-row curvature
+    # is strong (6 levels a pixel on average) and three times its two-row
+    # curvature. (One argument type for the kernel: contiguous, 3-D.)
+    image = np.ascontiguousarray(image)
+    return dot_kernels.combed_tiles(image if image.ndim == 3 else image[:, :, None],
+                                    int(tile_rows)) >= 2
 
 
 def one_field(image: np.ndarray, field: str) -> np.ndarray:

@@ -91,18 +91,22 @@ def combed_tiles(image, tile_rows):
     cols = cols_in // 4 * 4
     pixels = tile_rows * 4
     count = 0
+    t1 = np.zeros(cols // 4, dtype=np.int64)
+    t2 = np.zeros(cols // 4, dtype=np.int64)
     for r0 in range(2, 2 + rows, tile_rows):
-        for c0 in range(0, cols, 4):
-            t1 = 0
-            t2 = 0
-            for r in range(r0, r0 + tile_rows):
-                for c in range(16 * c0, 16 * (c0 + 4), 16):
-                    mid = 2 * np.int64(image[r, c, ch])
-                    t1 += abs(mid - np.int64(image[r - 1, c, ch])
-                              - np.int64(image[r + 1, c, ch]))
-                    t2 += abs(mid - np.int64(image[r - 2, c, ch])
-                              - np.int64(image[r + 2, c, ch]))
-            if t1 > 6 * pixels and t1 > 3 * t2:
+        t1[:] = 0
+        t2[:] = 0
+        # Row by row (the image's order in memory), into the band's tiles.
+        for r in range(r0, r0 + tile_rows):
+            for j in range(cols):
+                c = 16 * j
+                mid = 2 * np.int64(image[r, c, ch])
+                t1[j // 4] += abs(mid - np.int64(image[r - 1, c, ch])
+                                  - np.int64(image[r + 1, c, ch]))
+                t2[j // 4] += abs(mid - np.int64(image[r - 2, c, ch])
+                                  - np.int64(image[r + 2, c, ch]))
+        for t in range(cols // 4):
+            if t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
                 count += 1
                 if count >= 2:
                     return count

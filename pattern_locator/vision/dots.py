@@ -97,18 +97,49 @@ class DotImage:
                                    self.grid_step)
         return out.reshape(shape)
 
+    def _grid_threshold(self) -> np.ndarray:
+        """Return the dot threshold on the grid (made once, when first needed)."""
+        cached = self._cache.get('grid_threshold')
+        if cached is None:
+            # The same margin as the decimated segmentation: its noise is the
+            # full resolution's only for white noise, and real noise (JPEG,
+            # defocused sensor noise) is seldom white.
+            cached = _threshold(self.white, self.noise / self.scale, self.params)
+            self._cache['grid_threshold'] = cached
+        return cached
+
     def _full_threshold(self) -> np.ndarray:
         """Return the dot threshold at full resolution (made once, when first needed)."""
         cached = self._cache.get('threshold')
         if cached is None:
             h, w = self.image.shape[:2]
-            # The same margin as the decimated segmentation: its noise is the
-            # full resolution's only for white noise, and real noise (JPEG,
-            # defocused sensor noise) is seldom white.
-            small = _threshold(self.white, self.noise / self.scale, self.params)
-            cached = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+            cached = cv2.resize(self._grid_threshold(), (w, h), interpolation=cv2.INTER_LINEAR)
             self._cache['threshold'] = cached
         return cached
+
+    def _threshold_in(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """
+        Return the full-resolution dot threshold in the window [x0, x1) x [y0, y1).
+
+        The pixels of :meth:`_full_threshold` there, bit for bit; when the
+        image is a whole number of grid cells (the usual sizes), by
+        resizing only the cells round the window: a window is a small part
+        of the image. Bilinear resizing by a whole factor maps each pixel
+        from the same two cells with the same weights in the part as in
+        the whole, away from the part's border (a cell kept beyond the
+        window on every side).
+        """
+        grid = self._grid_threshold()
+        h, w = self.image.shape[:2]
+        gh, gw = grid.shape
+        if w % gw or h % gh or x1 <= x0 or y1 <= y0:
+            return self._full_threshold()[y0:y1, x0:x1]
+        kx, ky = w // gw, h // gh
+        c0, c1 = max(0, x0 // kx - 1), min(gw, (x1 - 1) // kx + 2)
+        r0, r1 = max(0, y0 // ky - 1), min(gh, (y1 - 1) // ky + 2)
+        part = cv2.resize(np.ascontiguousarray(grid[r0:r1, c0:c1]),
+                          ((c1 - c0) * kx, (r1 - r0) * ky), interpolation=cv2.INTER_LINEAR)
+        return part[y0 - r0 * ky:y1 - r0 * ky, x0 - c0 * kx:x1 - c0 * kx]
 
     def white_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Local white of the darkest channel at image points (bilinear on the grid)."""
@@ -179,7 +210,7 @@ class DotImage:
         x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
         roi = self.image[y0:y1, x0:x1]
         darkest = roi if self.grey_only else _min_channel(np.ascontiguousarray(roi))
-        mask = cv2.compare(darkest, self._full_threshold()[y0:y1, x0:x1], cv2.CMP_LT)
+        mask = cv2.compare(darkest, self._threshold_in(x0, y0, x1, y1), cv2.CMP_LT)
         # Components cut by the window's edge are dropped: not whole dots.
         return _components(mask, 1, (x0, y0), self.params.max_dot_area_fraction * h * w)
 

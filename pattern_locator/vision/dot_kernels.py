@@ -149,11 +149,68 @@ def dot_components(stats, centroids, scale, ox, oy, max_area, h, w):
     return idx, u, v
 
 
+@_kernel
+def threshold(white, noise, keep_ratio, noise_factor, min_white):
+    """
+    Grey level below which a pixel is dot, per grid cell (uint8), from the white and noise.
+
+    :func:`.dots._threshold` says why. float32 throughout (``white``,
+    ``noise`` float32 grids; ``keep_ratio`` = 1 - dark_ratio and
+    ``noise_factor`` float32 scalars), as numpy computes it with Python
+    scalars; truncated to uint8 after clipping to 0..255 (NaN gives 0).
+    """
+    h, w = white.shape
+    out = np.empty((h, w), dtype=np.uint8)
+    half = np.float32(0.5)
+    two = np.float32(2.0)
+    zero = np.float32(0.0)
+    top = np.float32(255.0)
+    for y in range(h):
+        for x in range(w):
+            wv = white[y, x]
+            margin = max(keep_ratio * wv, min(noise_factor * noise[y, x], half * wv))
+            margin = max(margin, two)
+            t = wv - margin if wv >= min_white else zero
+            t = min(max(t, zero), top)
+            out[y, x] = np.uint8(t) if t == t else np.uint8(0)
+    return out
+
+
+@_kernel
+def faint_components(stats, centroids, own, max_area, scale, dx, dy):
+    """
+    The spots of :meth:`.dots.DotImage.faint_spots` from their connected components.
+
+    ``stats``, ``centroids``: OpenCV's (row 0 the background); ``own``: the
+    label at the centre (0: none). Spots of at most ``max_area`` image
+    pixels (``scale`` image pixels a side per component pixel), the own
+    one left out; their centroids times ``scale`` plus (``dx``, ``dy``).
+    Returns the spots (K, 2) and the own spot's area (0 if none).
+    """
+    n = stats.shape[0]
+    xy = np.empty((max(n - 1, 0), 2))
+    count = 0
+    own_area = 0.0
+    for i in range(1, n):
+        area = np.float64(stats[i, 4]) * scale * scale
+        if i == own:
+            own_area = area
+            continue
+        if area <= max_area:
+            xy[count, 0] = centroids[i, 0] * scale + dx
+            xy[count, 1] = centroids[i, 1] * scale + dy
+            count += 1
+    return xy[:count].copy(), own_area
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) each kernel with the argument types :mod:`.dots` uses."""
     table = np.zeros((2, 2), dtype=np.float32)
     bilinear(table, np.zeros(1), np.zeros(1), 8)
     combed_tiles(np.zeros((40, 40, 3), dtype=np.uint8), 16)
+    grid = np.zeros((2, 2), dtype=np.float32)
+    threshold(grid, grid, np.float32(0.25), np.float32(10.0), 24)
+    faint_components(np.zeros((2, 5), dtype=np.int32), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)
     dot_components(np.zeros((2, 5), dtype=np.int32), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
 
 

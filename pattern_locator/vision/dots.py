@@ -194,15 +194,11 @@ class DotImage:
         margin = max(_FAINT_RATIO * white, 5.0 * noise / s, 2.0)
         mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
         _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
-        area = stats[1:, cv2.CC_STAT_AREA].astype(float) * s * s
         own = int(labels[min(int(v / s), y1 - 1) - y0, min(int(u / s), x1 - 1) - x0])
-        keep = area <= max_area
-        own_area = 0.0
-        if own > 0:
-            keep[own - 1] = False
-            own_area = float(area[own - 1])
-        xy = centroids[1:][keep] * s + ((x0 + 0.5) * s - 0.5 - u, (y0 + 0.5) * s - 0.5 - v)
-        return xy, own_area
+        xy, own_area = dot_kernels.faint_components(
+            stats, centroids, own, float(max_area), int(s), (x0 + 0.5) * s - 0.5 - u,
+            (y0 + 0.5) * s - 0.5 - v)
+        return xy, float(own_area)
 
     def blobs_in(self, x0: int, y0: int, x1: int, y1: int) -> Blobs:
         """Segment the window [x0, x1) x [y0, y1) again at full resolution."""
@@ -274,15 +270,20 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
 
 def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> np.ndarray:
     """Grey level below which a pixel is dot, from the local white and noise."""
-    white = np.asarray(white, dtype=np.float32)
     # Ink is at least half as dark as the paper is bright, whatever the
     # noise: a card next to a busy scene (where the noise is measured) keeps
-    # its dots.
-    margin = np.maximum((1.0 - params.dark_ratio) * white,
-                        np.minimum(params.noise_factor * noise, 0.5 * white))
-    margin = np.maximum(margin, 2.0)
-    threshold = np.where(white >= params.min_white, white - margin, 0.0)
-    return np.clip(threshold, 0, 255).astype(np.uint8)
+    # its dots. The margin is the larger of (1 - dark_ratio) white and
+    # noise_factor noise (at most half the white), at least 2 grey levels;
+    # no dots where the white is below min_white (dot_kernels.threshold).
+    # float32, as the grids are (any shape: one kernel signature, 2-D).
+    white, noise = np.broadcast_arrays(np.asarray(white, dtype=np.float32),
+                                       np.asarray(noise, dtype=np.float32))
+    shape = white.shape
+    return dot_kernels.threshold(
+        np.ascontiguousarray(white.reshape(1, -1) if white.ndim != 2 else white),
+        np.ascontiguousarray(noise.reshape(1, -1) if noise.ndim != 2 else noise),
+        np.float32(1.0 - params.dark_ratio), np.float32(params.noise_factor),
+        int(params.min_white)).reshape(shape)
 
 
 def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],

@@ -101,6 +101,37 @@ def test_components_keep_what_the_dot_tests_keep():
         assert np.array_equal(v, 20 + 2.0 * (centroids[idx, 1] + 0.5) - 0.5)
 
 
+def test_threshold_is_numpys_float32_arithmetic():
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 20, size=2))
+        white = rng.uniform(0, 255, shape).astype(np.float32)
+        white[rng.random(shape) < 0.3] = rng.integers(0, 256)
+        noise = rng.exponential(rng.uniform(0.1, 20.0), shape).astype(np.float32)
+        keep, factor, least = rng.uniform(0.05, 0.7), rng.uniform(1.0, 20.0), int(rng.integers(60))
+        margin = np.maximum(keep * white, np.minimum(factor * noise, 0.5 * white))
+        expected = np.clip(np.where(white >= least, white - np.maximum(margin, 2.0), 0.0),
+                           0, 255).astype(np.uint8)
+        got = dot_kernels.threshold(white, noise, np.float32(keep), np.float32(factor), least)
+        assert np.array_equal(got, expected)
+
+
+def test_faint_spots_leave_out_the_own_spot_and_big_ones():
+    rng = np.random.default_rng(9)
+    for _ in range(100):
+        mask = (rng.random(tuple(rng.integers(3, 40, size=2))) < 0.3).astype(np.uint8) * 255
+        n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        own = int(rng.integers(0, n))
+        max_area = float(rng.integers(1, 40))
+        area = stats[1:, cv2.CC_STAT_AREA] * 4.0
+        keep = area <= max_area
+        if own > 0:
+            keep[own - 1] = False
+        xy, own_area = dot_kernels.faint_components(stats, centroids, own, max_area, 2, 1.5, -2.5)
+        assert np.array_equal(xy, centroids[1:][keep] * 2 + (1.5, -2.5))
+        assert own_area == (area[own - 1] if own > 0 else 0.0)
+
+
 def test_one_compiled_signature_per_kernel_after_detections():
     # Each argument-type combination compiles again (seconds): the dots
     # stage passes one, colour or grey, decimated or windowed.
@@ -110,7 +141,8 @@ def test_one_compiled_signature_per_kernel_after_detections():
     detector = Detector(CFG)
     assert detector.detect(image, VGA)
     assert detector.detect(np.ascontiguousarray(image[:, :, 1]), VGA)
-    kernels = [dot_kernels.bilinear, dot_kernels.combed_tiles, dot_kernels.dot_components]
+    kernels = [dot_kernels.bilinear, dot_kernels.combed_tiles, dot_kernels.dot_components,
+               dot_kernels.threshold, dot_kernels.faint_components]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}

@@ -331,7 +331,7 @@ class Detector:
 
 
 def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:
-    """Return, per dot index, the slot-ordered row that holds it when slot ``point1`` is point 1."""
+    """Return, per dot index, the slot-ordered row holding it when slot ``point1`` is point 1."""
     order = np.zeros(config.n_dots, dtype=int)
     for r in range(config.n_rings):
         for k in range(RING_POINTS):

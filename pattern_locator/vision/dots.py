@@ -25,7 +25,7 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
-from . import dot_kernels
+from . import card_kernels
 from .detector_params import DetectorParams
 from ..errors import ImageError
 
@@ -92,9 +92,9 @@ class DotImage:
         """Bilinear look-up of a grid at image points (1-D, or any shape: the result's)."""
         u = np.asarray(u, dtype=np.float64)
         shape = u.shape
-        out = dot_kernels.bilinear(table, np.ascontiguousarray(u.ravel()),
-                                   np.ascontiguousarray(np.asarray(v, dtype=np.float64).ravel()),
-                                   self.grid_step)
+        v = np.asarray(v, dtype=np.float64)
+        out = card_kernels.bilinear(table, np.ascontiguousarray(u.ravel()),
+                                    np.ascontiguousarray(v.ravel()), self.grid_step)
         return out.reshape(shape)
 
     def _grid_threshold(self) -> np.ndarray:
@@ -195,7 +195,7 @@ class DotImage:
         mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
         _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
         own = int(labels[min(int(v / s), y1 - 1) - y0, min(int(u / s), x1 - 1) - x0])
-        xy, own_area = dot_kernels.faint_components(
+        xy, own_area = card_kernels.faint_components(
             stats, centroids, own, float(max_area), int(s), (x0 + 0.5) * s - 0.5 - u,
             (y0 + 0.5) * s - 0.5 - v)
         return xy, float(own_area)
@@ -274,12 +274,12 @@ def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> 
     # noise: a card next to a busy scene (where the noise is measured) keeps
     # its dots. The margin is the larger of (1 - dark_ratio) white and
     # noise_factor noise (at most half the white), at least 2 grey levels;
-    # no dots where the white is below min_white (dot_kernels.threshold).
+    # no dots where the white is below min_white (card_kernels.threshold).
     # float32, as the grids are (any shape: one kernel signature, 2-D).
     white, noise = np.broadcast_arrays(np.asarray(white, dtype=np.float32),
                                        np.asarray(noise, dtype=np.float32))
     shape = white.shape
-    return dot_kernels.threshold(
+    return card_kernels.threshold(
         np.ascontiguousarray(white.reshape(1, -1) if white.ndim != 2 else white),
         np.ascontiguousarray(noise.reshape(1, -1) if noise.ndim != 2 else noise),
         np.float32(1.0 - params.dark_ratio), np.float32(params.noise_factor),
@@ -295,9 +295,9 @@ def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
     h, w = mask.shape
     # Round dots fill a good part of their box and are not long and thin (a
     # 75-degree tilt makes a dot about 4:1); a dot cut by the border has a
-    # false centre. (dot_kernels.dot_components: the tests and the centres.)
-    idx, u, v = dot_kernels.dot_components(stats, centroids, int(scale), int(origin[0]),
-                                           int(origin[1]), float(max_area), h, w)
+    # false centre. (card_kernels.dot_components: the tests and the centres.)
+    idx, u, v = card_kernels.dot_components(stats, centroids, int(scale), int(origin[0]),
+                                            int(origin[1]), float(max_area), h, w)
     s = float(scale)
     return Blobs(u, v, stats[idx, cv2.CC_STAT_AREA].astype(float) * s * s, stats[idx, :4],
                  idx.astype(np.int32), labels, scale, origin)
@@ -323,12 +323,12 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     """
     # Per tile of `tile_rows` rows and four sampled columns of the green
     # channel, the curvature over one row and over two, summed
-    # (dot_kernels.combed_tiles): a tile counts when its one-row curvature
+    # (card_kernels.combed_tiles): a tile counts when its one-row curvature
     # is strong (6 levels a pixel on average) and three times its two-row
     # curvature. (One argument type for the kernel: contiguous, 3-D.)
     image = np.ascontiguousarray(image)
-    return dot_kernels.combed_tiles(image if image.ndim == 3 else image[:, :, None],
-                                    int(tile_rows)) >= 2
+    return card_kernels.combed_tiles(image if image.ndim == 3 else image[:, :, None],
+                                     int(tile_rows)) >= 2
 
 
 def one_field(image: np.ndarray, field: str) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Compiled passes of the dots stage: numpy's results to the bit, indices kept in bounds."""
+"""Compiled passes of the dots stage (in card_kernels): numpy's results to the bit, in bounds."""
 
 import cv2
 import numba
@@ -6,7 +6,7 @@ import numpy as np
 from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
                                         render_scene, RenderOptions)
-from pattern_locator.vision import dot_kernels
+from pattern_locator.vision import card_kernels
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.detector import Detector
 from pattern_locator.vision.dots import combed
@@ -37,7 +37,7 @@ def test_grid_look_up_is_numpys_bilinear_to_the_bit():
         u = rng.uniform(-20, step * tw + 20, 30)
         v = rng.uniform(-20, step * th + 20, 30)
         u[::4] = np.round(u[::4])               # on cell centres and edges
-        got = dot_kernels.bilinear(table, u, v, step)
+        got = card_kernels.bilinear(table, u, v, step)
         assert np.array_equal(got, _bilinear_numpy(table, u, v, step))
 
 
@@ -45,7 +45,7 @@ def test_grid_look_up_keeps_non_finite_points_in_bounds():
     table = np.arange(12, dtype=np.float32).reshape(3, 4)
     u = np.array([np.nan, np.inf, -np.inf, 1e300, -1e300, 5.0])
     v = np.array([5.0, np.inf, -np.inf, -1e300, 1e300, np.nan])
-    got = dot_kernels.bilinear(table, u, v, 4)
+    got = card_kernels.bilinear(table, u, v, 4)
     assert np.isnan(got[0]) and np.isnan(got[5])
     assert got[1:5].tolist() == [11.0, 0.0, 3.0, 8.0]
 
@@ -95,7 +95,7 @@ def test_components_keep_what_the_dot_tests_keep():
                 & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
                 & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
         keep[0] = False
-        idx, u, v = dot_kernels.dot_components(stats, centroids, 2, 10, 20, max_area, h, w)
+        idx, u, v = card_kernels.dot_components(stats, centroids, 2, 10, 20, max_area, h, w)
         assert np.array_equal(idx, np.flatnonzero(keep))
         assert np.array_equal(u, 10 + 2.0 * (centroids[idx, 0] + 0.5) - 0.5)
         assert np.array_equal(v, 20 + 2.0 * (centroids[idx, 1] + 0.5) - 0.5)
@@ -112,7 +112,7 @@ def test_threshold_is_numpys_float32_arithmetic():
         margin = np.maximum(keep * white, np.minimum(factor * noise, 0.5 * white))
         expected = np.clip(np.where(white >= least, white - np.maximum(margin, 2.0), 0.0),
                            0, 255).astype(np.uint8)
-        got = dot_kernels.threshold(white, noise, np.float32(keep), np.float32(factor), least)
+        got = card_kernels.threshold(white, noise, np.float32(keep), np.float32(factor), least)
         assert np.array_equal(got, expected)
 
 
@@ -127,7 +127,7 @@ def test_faint_spots_leave_out_the_own_spot_and_big_ones():
         keep = area <= max_area
         if own > 0:
             keep[own - 1] = False
-        xy, own_area = dot_kernels.faint_components(stats, centroids, own, max_area, 2, 1.5, -2.5)
+        xy, own_area = card_kernels.faint_components(stats, centroids, own, max_area, 2, 1.5, -2.5)
         assert np.array_equal(xy, centroids[1:][keep] * 2 + (1.5, -2.5))
         assert own_area == (area[own - 1] if own > 0 else 0.0)
 
@@ -141,8 +141,8 @@ def test_one_compiled_signature_per_kernel_after_detections():
     detector = Detector(CFG)
     assert detector.detect(image, VGA)
     assert detector.detect(np.ascontiguousarray(image[:, :, 1]), VGA)
-    kernels = [dot_kernels.bilinear, dot_kernels.combed_tiles, dot_kernels.dot_components,
-               dot_kernels.threshold, dot_kernels.faint_components]
+    kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
+               card_kernels.threshold, card_kernels.faint_components]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}

@@ -1317,7 +1317,9 @@ def warm_up() -> float:
     grid = np.zeros((2, 2), dtype=np.float32)
     bilinear(grid, np.zeros(1), np.zeros(1), 8)
     threshold(grid, grid, np.float32(0.25), np.float32(10.0), 24)
-    combed_tiles(np.zeros((40, 40, 3), dtype=np.uint8), 16)
+    image = np.zeros((40, 40, 3), dtype=np.uint8)
+    image.flags.writeable = False
+    combed_tiles(image, 16)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
     faint_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)
     return time.perf_counter() - start

@@ -325,10 +325,12 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     # channel, the curvature over one row and over two, summed
     # (card_kernels.combed_tiles): a tile counts when its one-row curvature
     # is strong (6 levels a pixel on average) and three times its two-row
-    # curvature. (One argument type for the kernel: contiguous, 3-D.)
+    # curvature. One argument type for the kernel (each compiles again, for
+    # seconds): contiguous, 3-D and read-only (a ROS image's buffer is).
     image = np.ascontiguousarray(image)
-    return card_kernels.combed_tiles(image if image.ndim == 3 else image[:, :, None],
-                                     int(tile_rows)) >= 2
+    view = (image if image.ndim == 3 else image[:, :, None]).view()
+    view.flags.writeable = False
+    return card_kernels.combed_tiles(view, int(tile_rows)) >= 2
 
 
 def one_field(image: np.ndarray, field: str) -> np.ndarray:

@@ -141,6 +141,10 @@ def test_one_compiled_signature_per_kernel_after_detections():
     detector = Detector(CFG)
     assert detector.detect(image, VGA)
     assert detector.detect(np.ascontiguousarray(image[:, :, 1]), VGA)
+    # A ROS image's buffer is read-only.
+    frozen = image.copy()
+    frozen.flags.writeable = False
+    assert detector.detect(frozen, VGA)
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
                card_kernels.threshold, card_kernels.faint_components]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)

@@ -201,6 +201,12 @@ class CameraModel:
         object.__setattr__(self, 'K', K)
         object.__setattr__(self, 'D', D)
         object.__setattr__(self, 'distortion_model', model)
+        # Asked for every few points a frame: made once (the fields are frozen).
+        distorted = model != 'none' and bool(np.any(D != 0.0))
+        object.__setattr__(self, '_distorted', distorted)
+        object.__setattr__(self, '_cv_coeffs', _cv_coefficients(D, model, distorted))
+        object.__setattr__(self, '_focal', np.array([K[0, 0], K[1, 1]], dtype=np.float64))
+        object.__setattr__(self, '_centre', np.array([K[0, 2], K[1, 2]], dtype=np.float64))
 
     @property
     def fx(self) -> float:
@@ -220,16 +226,10 @@ class CameraModel:
 
     @property
     def has_distortion(self) -> bool:
-        return self.distortion_model != 'none' and bool(np.any(self.D != 0.0))
+        return self._distorted
 
     def _cv_dist(self) -> np.ndarray:
-        if not self.has_distortion:
-            return np.zeros(5)
-        if self.distortion_model == 'rational_polynomial':
-            return np.pad(self.D, (0, max(0, 8 - len(self.D))))[:8]
-        if self.distortion_model == 'equidistant':
-            return np.pad(self.D, (0, max(0, 4 - len(self.D))))[:4]
-        return np.pad(self.D, (0, max(0, 5 - len(self.D))))[:5]
+        return self._cv_coeffs
 
     def project(self, points_camera: np.ndarray) -> np.ndarray:
         """Pixels (N, 2) of 3D points (N, 3) in the optical frame, with distortion."""
@@ -244,9 +244,8 @@ class CameraModel:
     def normalize(self, pixels: np.ndarray) -> np.ndarray:
         """Undistorted normalised coordinates (N, 2) (x/z, y/z) of pixels (N, 2)."""
         px = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
-        if not self.has_distortion:
-            out = (px.reshape(-1, 2) - [self.cx, self.cy]) / [self.fx, self.fy]
-            return out
+        if not self._distorted:
+            return (px.reshape(-1, 2) - self._centre) / self._focal
         if self.distortion_model == 'equidistant':
             out = cv2.fisheye.undistortPoints(px, self.K, self._cv_dist())
         else:
@@ -257,12 +256,11 @@ class CameraModel:
     def undistort_pixels(self, pixels: np.ndarray) -> np.ndarray:
         """Pixels of an ideal (distortion-free) camera with the same K."""
         n = self.normalize(pixels)
-        return n * [self.fx, self.fy] + [self.cx, self.cy]
+        return n * self._focal + self._centre
 
     def distort_pixels(self, ideal_px: np.ndarray) -> np.ndarray:
         """Return this camera's pixels of ideal-camera pixels (N, 2): undistort's inverse."""
-        n = (np.asarray(ideal_px, dtype=float).reshape(-1, 2) - [self.cx, self.cy]) / [
-            self.fx, self.fy]
+        n = (np.asarray(ideal_px, dtype=float).reshape(-1, 2) - self._centre) / self._focal
         return self.project(np.column_stack([n, np.ones(len(n))]))
 
     def scaled(self, factor: float) -> 'CameraModel':
@@ -307,6 +305,22 @@ class CameraModel:
                                      'data': [float(v) for v in np.eye(3).flat]},
             'projection_matrix': {'rows': 3, 'cols': 4, 'data': [float(v) for v in P.flat]},
         }
+
+
+def _cv_coefficients(D: np.ndarray, model: str, distorted: bool) -> np.ndarray:
+    """Return OpenCV's distortion coefficients for a checked ``D`` of ``model`` (read-only)."""
+    if not distorted:
+        out = np.zeros(5)
+    elif model == 'rational_polynomial':
+        out = np.pad(D, (0, max(0, 8 - len(D))))[:8]
+    elif model == 'equidistant':
+        out = np.pad(D, (0, max(0, 4 - len(D))))[:4]
+    else:
+        out = np.pad(D, (0, max(0, 5 - len(D))))[:5]
+    out = np.array(out, dtype=np.float64)
+    # Shared by every call: nobody may change it.
+    out.flags.writeable = False
+    return out
 
 
 def _fov_deg(focal: float, side: int) -> float:

@@ -102,6 +102,10 @@ class Detector:
         self._paper_xy = _paper_points(config)
         self._paper_room = _paper_clearance(config, self._paper_xy)
         self._rho_out = config.ring_radii[0] / config.centre_dot_radius
+        # Per card found, made once: slot order -> dot order for each slot of
+        # point 1, and the outer ring's plane points.
+        self._orders = [_dot_order(config, point1) for point1 in range(RING_POINTS)]
+        self._outer = config.model_points()[1:1 + RING_POINTS, :2]
         half = config.card_size / 2
         # How the card's plane is shared between the windows of its dots: before
         # point 1 is known, with every place a mark may be; after, with the
@@ -276,14 +280,10 @@ class Detector:
             if not self._handed(dot_image, camera, H_final, paper, spots, valid, point1):
                 return None
         # Slot order -> dot order (point 1 first).
-        order = np.zeros(cfg.n_dots, dtype=int)
-        for r in range(n_rings):
-            for k in range(RING_POINTS):
-                order[cfg.dot_index(r, (k - point1) % RING_POINTS + 1)] = 1 + r * RING_POINTS + k
+        order = self._orders[point1 % RING_POINTS]
         points = np.where(valid[order, None], spots.points[order], np.nan)
         areas = np.where(valid[order], spots.area[order], np.nan)
-        outer = cfg.model_points()[1:1 + RING_POINTS, :2]
-        ring_px = apply_h(H_final, outer)
+        ring_px = apply_h(H_final, self._outer)
         if camera is not None and camera.has_distortion:
             ring_px = camera.distort_pixels(ring_px)
         if complete:
@@ -328,6 +328,16 @@ class Detector:
             if len(black) < 5:
                 return False
         return handedness(marks, float(median(black))) == 'ok'
+
+
+def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:
+    """Return, per dot index, the slot-ordered row holding it when slot ``point1`` is point 1."""
+    order = np.zeros(config.n_dots, dtype=int)
+    for r in range(config.n_rings):
+        for k in range(RING_POINTS):
+            order[config.dot_index(r, (k - point1) % RING_POINTS + 1)] = 1 + r * RING_POINTS + k
+    order.flags.writeable = False
+    return order
 
 
 def _refittable(valid: np.ndarray) -> bool:

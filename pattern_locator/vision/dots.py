@@ -25,6 +25,7 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
+from . import card_kernels
 from .detector_params import DetectorParams
 from ..errors import ImageError
 
@@ -88,33 +89,57 @@ class DotImage:
     _cache: dict = dataclass_field(default_factory=dict, repr=False, compare=False)
 
     def _grid(self, table: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        gx = np.clip((np.asarray(u, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
-                     0, table.shape[1] - 1)
-        gy = np.clip((np.asarray(v, dtype=np.float64) + 0.5) / self.grid_step - 0.5,
-                     0, table.shape[0] - 1)
-        x0 = np.minimum(gx.astype(np.intp), table.shape[1] - 2) if table.shape[1] > 1 else \
-            np.zeros_like(gx, dtype=np.intp)
-        y0 = np.minimum(gy.astype(np.intp), table.shape[0] - 2) if table.shape[0] > 1 else \
-            np.zeros_like(gy, dtype=np.intp)
-        fx = np.clip(gx - x0, 0.0, 1.0)
-        fy = np.clip(gy - y0, 0.0, 1.0)
-        x1 = np.minimum(x0 + 1, table.shape[1] - 1)
-        y1 = np.minimum(y0 + 1, table.shape[0] - 1)
-        return ((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
-                + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+        """Bilinear look-up of a grid at image points (1-D, or any shape: the result's)."""
+        u = np.asarray(u, dtype=np.float64)
+        shape = u.shape
+        v = np.asarray(v, dtype=np.float64)
+        out = card_kernels.bilinear(table, np.ascontiguousarray(u.ravel()),
+                                    np.ascontiguousarray(v.ravel()), self.grid_step)
+        return out.reshape(shape)
+
+    def _grid_threshold(self) -> np.ndarray:
+        """Return the dot threshold on the grid (made once, when first needed)."""
+        cached = self._cache.get('grid_threshold')
+        if cached is None:
+            # The same margin as the decimated segmentation: its noise is the
+            # full resolution's only for white noise, and real noise (JPEG,
+            # defocused sensor noise) is seldom white.
+            cached = _threshold(self.white, self.noise / self.scale, self.params)
+            self._cache['grid_threshold'] = cached
+        return cached
 
     def _full_threshold(self) -> np.ndarray:
         """Return the dot threshold at full resolution (made once, when first needed)."""
         cached = self._cache.get('threshold')
         if cached is None:
             h, w = self.image.shape[:2]
-            # The same margin as the decimated segmentation: its noise is the
-            # full resolution's only for white noise, and real noise (JPEG,
-            # defocused sensor noise) is seldom white.
-            small = _threshold(self.white, self.noise / self.scale, self.params)
-            cached = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+            cached = cv2.resize(self._grid_threshold(), (w, h), interpolation=cv2.INTER_LINEAR)
             self._cache['threshold'] = cached
         return cached
+
+    def _threshold_in(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """
+        Return the full-resolution dot threshold in the window [x0, x1) x [y0, y1).
+
+        The pixels of :meth:`_full_threshold` there, bit for bit; when the
+        image is a whole number of grid cells (the usual sizes), by
+        resizing only the cells round the window: a window is a small part
+        of the image. Bilinear resizing by a whole factor maps each pixel
+        from the same two cells with the same weights in the part as in
+        the whole, away from the part's border (a cell kept beyond the
+        window on every side).
+        """
+        grid = self._grid_threshold()
+        h, w = self.image.shape[:2]
+        gh, gw = grid.shape
+        if w % gw or h % gh or x1 <= x0 or y1 <= y0:
+            return self._full_threshold()[y0:y1, x0:x1]
+        kx, ky = w // gw, h // gh
+        c0, c1 = max(0, x0 // kx - 1), min(gw, (x1 - 1) // kx + 2)
+        r0, r1 = max(0, y0 // ky - 1), min(gh, (y1 - 1) // ky + 2)
+        part = cv2.resize(np.ascontiguousarray(grid[r0:r1, c0:c1]),
+                          ((c1 - c0) * kx, (r1 - r0) * ky), interpolation=cv2.INTER_LINEAR)
+        return part[y0 - r0 * ky:y1 - r0 * ky, x0 - c0 * kx:x1 - c0 * kx]
 
     def white_at(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Local white of the darkest channel at image points (bilinear on the grid)."""
@@ -169,15 +194,11 @@ class DotImage:
         margin = max(_FAINT_RATIO * white, 5.0 * noise / s, 2.0)
         mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
         _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
-        area = stats[1:, cv2.CC_STAT_AREA].astype(float) * s * s
         own = int(labels[min(int(v / s), y1 - 1) - y0, min(int(u / s), x1 - 1) - x0])
-        keep = area <= max_area
-        own_area = 0.0
-        if own > 0:
-            keep[own - 1] = False
-            own_area = float(area[own - 1])
-        xy = centroids[1:][keep] * s + ((x0 + 0.5) * s - 0.5 - u, (y0 + 0.5) * s - 0.5 - v)
-        return xy, own_area
+        xy, own_area = card_kernels.faint_components(
+            stats, centroids, own, float(max_area), int(s), (x0 + 0.5) * s - 0.5 - u,
+            (y0 + 0.5) * s - 0.5 - v)
+        return xy, float(own_area)
 
     def blobs_in(self, x0: int, y0: int, x1: int, y1: int) -> Blobs:
         """Segment the window [x0, x1) x [y0, y1) again at full resolution."""
@@ -185,7 +206,7 @@ class DotImage:
         x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
         roi = self.image[y0:y1, x0:x1]
         darkest = roi if self.grey_only else _min_channel(np.ascontiguousarray(roi))
-        mask = cv2.compare(darkest, self._full_threshold()[y0:y1, x0:x1], cv2.CMP_LT)
+        mask = cv2.compare(darkest, self._threshold_in(x0, y0, x1, y1), cv2.CMP_LT)
         # Components cut by the window's edge are dropped: not whole dots.
         return _components(mask, 1, (x0, y0), self.params.max_dot_area_fraction * h * w)
 
@@ -249,15 +270,20 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
 
 def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> np.ndarray:
     """Grey level below which a pixel is dot, from the local white and noise."""
-    white = np.asarray(white, dtype=np.float32)
     # Ink is at least half as dark as the paper is bright, whatever the
     # noise: a card next to a busy scene (where the noise is measured) keeps
-    # its dots.
-    margin = np.maximum((1.0 - params.dark_ratio) * white,
-                        np.minimum(params.noise_factor * noise, 0.5 * white))
-    margin = np.maximum(margin, 2.0)
-    threshold = np.where(white >= params.min_white, white - margin, 0.0)
-    return np.clip(threshold, 0, 255).astype(np.uint8)
+    # its dots. The margin is the larger of (1 - dark_ratio) white and
+    # noise_factor noise (at most half the white), at least 2 grey levels;
+    # no dots where the white is below min_white (card_kernels.threshold).
+    # float32, as the grids are (any shape: one kernel signature, 2-D).
+    white, noise = np.broadcast_arrays(np.asarray(white, dtype=np.float32),
+                                       np.asarray(noise, dtype=np.float32))
+    shape = white.shape
+    return card_kernels.threshold(
+        np.ascontiguousarray(white.reshape(1, -1) if white.ndim != 2 else white),
+        np.ascontiguousarray(noise.reshape(1, -1) if noise.ndim != 2 else noise),
+        np.float32(1.0 - params.dark_ratio), np.float32(params.noise_factor),
+        int(params.min_white)).reshape(shape)
 
 
 def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
@@ -267,21 +293,13 @@ def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
     n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
         mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
     h, w = mask.shape
-    area = stats[:, cv2.CC_STAT_AREA]
-    x, y = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
-    bw, bh = stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT]
     # Round dots fill a good part of their box and are not long and thin (a
     # 75-degree tilt makes a dot about 4:1); a dot cut by the border has a
-    # false centre.
-    keep = ((area <= max_area) & (area * 4 >= bw * bh)
-            & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
-            & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
-    keep[0] = False
-    idx = np.flatnonzero(keep)
+    # false centre. (card_kernels.dot_components: the tests and the centres.)
+    idx, u, v = card_kernels.dot_components(stats, centroids, int(scale), int(origin[0]),
+                                            int(origin[1]), float(max_area), h, w)
     s = float(scale)
-    u = origin[0] + s * (centroids[idx, 0] + 0.5) - 0.5
-    v = origin[1] + s * (centroids[idx, 1] + 0.5) - 0.5
-    return Blobs(u, v, area[idx].astype(float) * s * s, stats[idx, :4].copy(),
+    return Blobs(u, v, stats[idx, cv2.CC_STAT_AREA].astype(float) * s * s, stats[idx, :4],
                  idx.astype(np.int32), labels, scale, origin)
 
 
@@ -303,27 +321,16 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     Measured on every sixteenth column, in tiles, so that one small card
     moving against a still background is enough.
     """
-    g = image[:, ::16, 1] if image.ndim == 3 else image[:, ::16]
-    g = g.astype(np.int16)
-    h = (g.shape[0] - 4) // 2 * 2
-    if h < 2 * tile_rows:
-        return False
-    mid = g[2:2 + h]
-    one = np.abs(2 * mid - g[1:1 + h] - g[3:3 + h])
-    two = np.abs(2 * mid - g[0:h] - g[4:4 + h])
-    rows = h // tile_rows * tile_rows
-    cols = one.shape[1] // 4 * 4
-    if cols == 0:
-        return False
-    # Tile sums: rows first (contiguous), then groups of four columns.
-    t1, t2 = (c[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols).sum(
-        axis=1, dtype=np.int32).reshape(rows // tile_rows, cols // 4, 4).sum(axis=2)
-        for c in (one, two))
-    pixels = tile_rows * 4
-    # A tile counts when its one-row curvature is strong (6 levels a pixel on
-    # average) and three times its two-row curvature.
-    strong = (t1 > 6 * pixels) & (t1 > 3 * t2)
-    return int(np.count_nonzero(strong)) >= 2
+    # Per tile of `tile_rows` rows and four sampled columns of the green
+    # channel, the curvature over one row and over two, summed
+    # (card_kernels.combed_tiles): a tile counts when its one-row curvature
+    # is strong (6 levels a pixel on average) and three times its two-row
+    # curvature. One argument type for the kernel (each compiles again, for
+    # seconds): contiguous, 3-D and read-only (a ROS image's buffer is).
+    image = np.ascontiguousarray(image)
+    view = (image if image.ndim == 3 else image[:, :, None]).view()
+    view.flags.writeable = False
+    return card_kernels.combed_tiles(view, int(tile_rows)) >= 2
 
 
 def one_field(image: np.ndarray, field: str) -> np.ndarray:

@@ -117,7 +117,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         # A close call decided by the image alone: compare the two at their
         # own optimum. (With a prior, IPPE's residuals are close enough.)
         candidates = sorted((_refined_candidate(obj, observed, K, r, t)
-                             for _, r, t in candidates), key=lambda sol: sol[0])
+                             for _, r, t, _ in candidates), key=lambda sol: sol[0])
         rms = [math.sqrt(c[0] / n) for c in candidates]
         ambiguity = rms[1] / max(rms[0], 1e-9)
     best, chosen_by = 0, 'reprojection'
@@ -127,13 +127,14 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
-    _, rvec, tvec = candidates[best]
+    # (Each candidate carries its projection, made for its residual.)
+    _, rvec, tvec, projected = candidates[best]
     corrected = observed
     if bias_correction:
         # The offset depends only weakly on the pose: computed from IPPE's
         # pose it leaves a bias far below the noise after the refinement.
         offset = (ellipse_centres(Pose.from_rvec(rvec, tvec), obj[:, :2], radii, K)
-                  - _project(obj, rvec, tvec, K))
+                  - projected)
         corrected = observed - offset
     rvec, tvec = _refine_lm(obj, corrected, K, rvec, tvec)
     residual = np.linalg.norm(_project(obj, rvec, tvec, K) - corrected, axis=1)
@@ -272,8 +273,9 @@ def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
     solutions = []
     for r, t in zip(rvecs, tvecs):
         r, t = np.asarray(r, float).reshape(3), np.asarray(t, float).reshape(3)
-        ss = float(np.sum((_project(obj, r, t, K) - observed_px) ** 2))
-        solutions.append((ss, r, t))
+        projected = _project(obj, r, t, K)
+        ss = float(np.sum((projected - observed_px) ** 2))
+        solutions.append((ss, r, t, projected))
     return solutions
 
 
@@ -290,7 +292,8 @@ def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 def _refined_candidate(obj, observed, K, rvec, tvec):
     rvec, tvec = _refine_lm(obj, observed, K, rvec, tvec)
-    return float(np.sum((_project(obj, rvec, tvec, K) - observed) ** 2)), rvec, tvec
+    projected = _project(obj, rvec, tvec, K)
+    return float(np.sum((projected - observed) ** 2)), rvec, tvec, projected
 
 
 def _refine_lm(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, rvec: np.ndarray,

@@ -88,3 +88,20 @@ def test_bad_parameters_and_images():
         DetectorParams(decimate=3)
     grey = check_image(np.zeros((40, 50, 1), np.uint8))
     assert grey.shape == (40, 50)
+
+
+@pytest.mark.parametrize('size, decimate', [((480, 640), 2), ((480, 640), 1), ((250, 330), 2)])
+def test_a_windows_threshold_is_the_full_resolution_thresholds_part(size, decimate):
+    # Resized round the window only (a whole number of cells a side), or
+    # cut from the whole (any other size): the same pixels either way.
+    image, _ = card_image(noise_sigma=2.0, seed=4, background='clutter')
+    image = np.ascontiguousarray(image[:size[0], :size[1]])
+    dot_image = segment(image, DetectorParams(decimate=decimate))
+    full = dot_image._full_threshold()
+    rng = np.random.default_rng(7)
+    h, w = size
+    for _ in range(200):
+        x0, y0 = int(rng.integers(0, w)), int(rng.integers(0, h))
+        x1 = min(w, x0 + int(rng.integers(1, 200)))
+        y1 = min(h, y0 + int(rng.integers(1, 200)))
+        assert np.array_equal(dot_image._threshold_in(x0, y0, x1, y1), full[y0:y1, x0:x1])

@@ -1,0 +1,152 @@
+"""Compiled passes of the dots stage (in card_kernels): numpy's results to the bit, in bounds."""
+
+import cv2
+import numba
+import numpy as np
+from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
+                                        render_scene, RenderOptions)
+from pattern_locator.vision import card_kernels
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.detector import Detector
+from pattern_locator.vision.dots import combed
+
+CFG = PatternConfig()
+VGA = CameraModel.from_focal(640, 480, 1000.0)
+
+
+def _bilinear_numpy(table, u, v, step):
+    """Look up the grid as numpy computes it (the kernel's specification)."""
+    gx = np.clip((u + 0.5) / step - 0.5, 0, table.shape[1] - 1)
+    gy = np.clip((v + 0.5) / step - 0.5, 0, table.shape[0] - 1)
+    x0 = np.minimum(gx.astype(np.intp), max(table.shape[1] - 2, 0))
+    y0 = np.minimum(gy.astype(np.intp), max(table.shape[0] - 2, 0))
+    fx, fy = np.clip(gx - x0, 0.0, 1.0), np.clip(gy - y0, 0.0, 1.0)
+    x1 = np.minimum(x0 + 1, table.shape[1] - 1)
+    y1 = np.minimum(y0 + 1, table.shape[0] - 1)
+    return ((1 - fy) * ((1 - fx) * table[y0, x0] + fx * table[y0, x1])
+            + fy * ((1 - fx) * table[y1, x0] + fx * table[y1, x1]))
+
+
+def test_grid_look_up_is_numpys_bilinear_to_the_bit():
+    rng = np.random.default_rng(2)
+    for _ in range(300):
+        th, tw = rng.integers(1, 6, size=2)
+        table = rng.uniform(0, 255, (th, tw)).astype(np.float32)
+        step = int(rng.integers(1, 9))
+        u = rng.uniform(-20, step * tw + 20, 30)
+        v = rng.uniform(-20, step * th + 20, 30)
+        u[::4] = np.round(u[::4])               # on cell centres and edges
+        got = card_kernels.bilinear(table, u, v, step)
+        assert np.array_equal(got, _bilinear_numpy(table, u, v, step))
+
+
+def test_grid_look_up_keeps_non_finite_points_in_bounds():
+    table = np.arange(12, dtype=np.float32).reshape(3, 4)
+    u = np.array([np.nan, np.inf, -np.inf, 1e300, -1e300, 5.0])
+    v = np.array([5.0, np.inf, -np.inf, -1e300, 1e300, np.nan])
+    got = card_kernels.bilinear(table, u, v, 4)
+    assert np.isnan(got[0]) and np.isnan(got[5])
+    assert got[1:5].tolist() == [11.0, 0.0, 3.0, 8.0]
+
+
+def _combed_numpy(image, tile_rows=16):
+    g = (image[:, ::16, 1] if image.ndim == 3 else image[:, ::16]).astype(np.int16)
+    h = (g.shape[0] - 4) // 2 * 2
+    cols = g.shape[1] // 4 * 4
+    if h < 2 * tile_rows or cols == 0:
+        return False
+    mid = g[2:2 + h]
+    one = np.abs(2 * mid - g[1:1 + h] - g[3:3 + h])
+    two = np.abs(2 * mid - g[0:h] - g[4:4 + h])
+    rows = h // tile_rows * tile_rows
+    t1, t2 = (c[:rows, :cols].reshape(rows // tile_rows, tile_rows, cols // 4, 4).sum(
+        axis=(1, 3), dtype=np.int32) for c in (one, two))
+    strong = (t1 > 6 * tile_rows * 4) & (t1 > 3 * t2)
+    return int(np.count_nonzero(strong)) >= 2
+
+
+def test_comb_test_counts_tiles_as_numpy_does():
+    rng = np.random.default_rng(5)
+    combs = 0
+    for _ in range(400):
+        h, w = rng.integers(1, 140), rng.integers(1, 240)
+        image = (rng.integers(0, 256, (h, w, 3)) // rng.integers(1, 60)).astype(np.uint8)
+        if rng.random() < 0.5:
+            # One field darker: a comb wherever the scene has structure.
+            image[1::2] //= 3
+        tile = int(rng.integers(1, 20))
+        expected = _combed_numpy(image, tile)
+        assert combed(image, tile) == expected
+        assert combed(np.ascontiguousarray(image[:, :, 1]), tile) == expected
+        combs += expected
+    assert 20 < combs < 380
+
+
+def test_components_keep_what_the_dot_tests_keep():
+    rng = np.random.default_rng(6)
+    for _ in range(50):
+        h, w = rng.integers(8, 60, size=2)
+        mask = (rng.random((h, w)) < 0.3).astype(np.uint8) * 255
+        _, _, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        x, y, bw, bh, area = (stats[:, k] for k in range(5))
+        max_area = float(rng.integers(1, 30))
+        keep = ((area <= max_area) & (area * 4 >= bw * bh)
+                & (np.maximum(bw, bh) <= 6 * np.minimum(bw, bh) + 2)
+                & (x > 0) & (y > 0) & (x + bw < w) & (y + bh < h))
+        keep[0] = False
+        idx, u, v = card_kernels.dot_components(stats, centroids, 2, 10, 20, max_area, h, w)
+        assert np.array_equal(idx, np.flatnonzero(keep))
+        assert np.array_equal(u, 10 + 2.0 * (centroids[idx, 0] + 0.5) - 0.5)
+        assert np.array_equal(v, 20 + 2.0 * (centroids[idx, 1] + 0.5) - 0.5)
+
+
+def test_threshold_is_numpys_float32_arithmetic():
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 20, size=2))
+        white = rng.uniform(0, 255, shape).astype(np.float32)
+        white[rng.random(shape) < 0.3] = rng.integers(0, 256)
+        noise = rng.exponential(rng.uniform(0.1, 20.0), shape).astype(np.float32)
+        keep, factor, least = rng.uniform(0.05, 0.7), rng.uniform(1.0, 20.0), int(rng.integers(60))
+        margin = np.maximum(keep * white, np.minimum(factor * noise, 0.5 * white))
+        expected = np.clip(np.where(white >= least, white - np.maximum(margin, 2.0), 0.0),
+                           0, 255).astype(np.uint8)
+        got = card_kernels.threshold(white, noise, np.float32(keep), np.float32(factor), least)
+        assert np.array_equal(got, expected)
+
+
+def test_faint_spots_leave_out_the_own_spot_and_big_ones():
+    rng = np.random.default_rng(9)
+    for _ in range(100):
+        mask = (rng.random(tuple(rng.integers(3, 40, size=2))) < 0.3).astype(np.uint8) * 255
+        n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        own = int(rng.integers(0, n))
+        max_area = float(rng.integers(1, 40))
+        area = stats[1:, cv2.CC_STAT_AREA] * 4.0
+        keep = area <= max_area
+        if own > 0:
+            keep[own - 1] = False
+        xy, own_area = card_kernels.faint_components(stats, centroids, own, max_area, 2, 1.5, -2.5)
+        assert np.array_equal(xy, centroids[1:][keep] * 2 + (1.5, -2.5))
+        assert own_area == (area[own - 1] if own > 0 else 0.0)
+
+
+def test_one_compiled_signature_per_kernel_after_detections():
+    # Each argument-type combination compiles again (seconds): the dots
+    # stage passes one, colour or grey, decimated or windowed.
+    T = card_pose_facing(3.0, 30.0, 200.0, -20.0, (80.0, 60.0), VGA)
+    image = render_scene(VGA, [CardPlacement(T, DotCardTexture(CFG, CFG.encode(2, 17, 3)))],
+                         RenderOptions(noise_sigma=1.0, background='photo', seed=8)).image
+    detector = Detector(CFG)
+    assert detector.detect(image, VGA)
+    assert detector.detect(np.ascontiguousarray(image[:, :, 1]), VGA)
+    # A ROS image's buffer is read-only.
+    frozen = image.copy()
+    frozen.flags.writeable = False
+    assert detector.detect(frozen, VGA)
+    kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
+               card_kernels.threshold, card_kernels.faint_components]
+    assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
+    assert all(len(k.signatures) == 1 for k in kernels), \
+        {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}

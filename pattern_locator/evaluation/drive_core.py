@@ -369,7 +369,7 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
                                        / card_size)
     fx_now = zoom_table.camera_at(zoom).fx
     fx_wanted = zoom_table.camera_at(wanted).fx
-    off_axis = math.hypot((choice.pan - pan_now), choice.tilt - tilt_now)
+    off_axis = math.hypot(choice.pan - pan_now, choice.tilt - tilt_now)
     if off_axis > math.radians(5.0):
         wanted, fx_wanted = 0.0, zoom_table.camera_at(0.0).fx      # find it wide first
     if abs(math.log(fx_wanted / fx_now)) > math.log(1.25):
@@ -428,7 +428,7 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
     wanted = zoom_table.zoom_for_focal(0.25 * zoom_table.width * distance / card_size)
     fx_now = zoom_table.camera_at(zoom).fx
     fx_wanted = zoom_table.camera_at(wanted).fx
-    if math.hypot((aim_pan - pan_now), aim_tilt - tilt_now) > math.radians(5.0):
+    if math.hypot(aim_pan - pan_now, aim_tilt - tilt_now) > math.radians(5.0):
         wanted, fx_wanted = 0.0, zoom_table.camera_at(0.0).fx      # find it wide first
     if abs(math.log(fx_wanted / fx_now)) > math.log(1.25):
         zoom = float(wanted)

@@ -67,9 +67,9 @@ from .search import SEARCH_TILT_BAND_RAD, SearchSweep
 from .zoom import ZOOM_STOP, ZOOM_TELE_UNITS, ZOOM_WIDE_UNITS, ZoomControl
 
 __all__ = ['HeadCommand', 'MODE_HOLD', 'MODE_IDLE', 'MODE_SEARCH', 'MODE_TRACK', 'MODES',
-           'PAN_MAX_STEPS', 'PAN_STEP_RAD_S', 'quantise_speed', 'TILT_MAX_STEPS',
-           'TILT_STEP_RAD_S', 'TrackingController', 'TrackingParams', 'ZOOM_TELE_UNITS',
-           'ZOOM_WIDE_UNITS']
+           'pan_aim_in_travel', 'PAN_MAX_STEPS', 'PAN_STEP_RAD_S', 'quantise_speed',
+           'TILT_MAX_STEPS', 'TILT_STEP_RAD_S', 'TrackingController', 'TrackingParams',
+           'ZOOM_TELE_UNITS', 'ZOOM_WIDE_UNITS']
 
 MODE_TRACK = 'track'
 MODE_HOLD = 'hold'

@@ -426,8 +426,11 @@ class SimNode(Node):
             self.get_logger().info('route finished')
         camera = self.zoom_table.camera_at(self._zoom_units)
         self._frames += 1
+
+        def head_at(x: float) -> Tuple[float, float]:
+            return self._head_at(x + origin)
+
         began = time.perf_counter()
-        head_at = lambda x: self._head_at(x + origin)  # noqa: E731
         image, blurs = self.sim.render(t, head_at, camera,
                                        seed=self.params['seed'] * 100_003 + self._frames)
         self._render_ms.append((time.perf_counter() - began) * 1e3)

@@ -32,6 +32,12 @@ class Footprint:
         self.T_room_building: Pose = room.T_building_room.inverse()
         self.size = np.asarray(room.size, dtype=float)
         self.z = float(room.T_building_room.t[2])
+        # Building (x, y) at this floor's height -> room (x, y): the 2-D part
+        # of T_room_building. The planner tests thousands of points a frame,
+        # and a 3-D pose per call cost more than the test.
+        R, t = self.T_room_building.R, self.T_room_building.t
+        self._rows = (float(R[0, 0]), float(R[0, 1]), float(R[1, 0]), float(R[1, 1]))
+        self._offset = (float(R[0, 2] * self.z + t[0]), float(R[1, 2] * self.z + t[1]))
 
     def local(self, points_xy: np.ndarray) -> np.ndarray:
         """Return building (x, y) points (at this floor's height) in the room frame."""
@@ -41,9 +47,16 @@ class Footprint:
 
     def contains(self, points_xy: np.ndarray, margin: float = 0.0) -> np.ndarray:
         """Return which points lie inside the rectangle grown by ``margin`` (bool array)."""
-        local = self.local(points_xy)
-        return ((local[:, 0] >= -margin) & (local[:, 0] <= self.size[0] + margin)
-                & (local[:, 1] >= -margin) & (local[:, 1] <= self.size[1] + margin))
+        points_xy = np.asarray(points_xy, dtype=float).reshape(-1, 2)
+        return self.inside(points_xy[:, 0], points_xy[:, 1], margin)
+
+    def inside(self, x, y, margin: float = 0.0):
+        """Return whether building points (``x``, ``y``: arrays or numbers) lie inside, grown."""
+        a, b, c, d = self._rows
+        lx = x * a + y * b + self._offset[0]
+        ly = x * c + y * d + self._offset[1]
+        return ((lx >= -margin) & (lx <= self.size[0] + margin)
+                & (ly >= -margin) & (ly <= self.size[1] + margin))
 
     def on_floor(self, z: float) -> bool:
         """Return whether a base at height ``z`` (building frame) stands on this room's floor."""

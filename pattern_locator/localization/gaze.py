@@ -174,14 +174,6 @@ class GazePlanner:
         self._normals = np.array([c.T_building_card.R[:, 2] for c in self._cards]
                                  ).reshape(-1, 3)
         self._footprints: Dict[Tuple[int, int], Footprint] = footprints(building)
-        # Each footprint as a 2-D map from building (x, y) to its room's (x, y)
-        # and its size: the sight-line test runs on thousands of probes a
-        # frame, and the 3-D pose it comes from cost more than the test.
-        self._flat: Dict[Tuple[int, int], Tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-        for key, footprint in self._footprints.items():
-            T = footprint.T_room_building
-            self._flat[key] = (T.R[:2, :2].T.copy(), T.R[:2, 2] * footprint.z + T.t[:2],
-                               footprint.size[:2].copy())
         angles = np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
         # A sample and the ring of points round it that must be inside too.
         self._ring = np.vstack([np.zeros((1, 2)), self.parameters.sight_clearance_m
@@ -205,19 +197,11 @@ class GazePlanner:
         """
         x, y = (float(v) for v in T_building_base.t[:2])
         z = float(T_building_base.t[2])
-        # Its distance outside each footprint of its floor (0 inside), as
-        # Footprint.contains would find it, on the flat maps (per frame, cheap).
-        outside = {}
-        for key, footprint in self._footprints.items():
-            if footprint.on_floor(z):
-                (a, c), (b, d) = self._flat[key][0]
-                (ox, oy), (sx, sy) = self._flat[key][1], self._flat[key][2]
-                lx, ly = x * a + y * b + ox, x * c + y * d + oy
-                outside[key] = max(-lx, lx - sx, -ly, ly - sy)
-        inside = [key for key, off in outside.items() if off <= 0.0]
+        level = [f for f in self._footprints.values() if f.on_floor(z)]
+        inside = [f.key for f in level if f.inside(x, y)]
         if inside:
             return inside, False
-        near = [key for key, off in outside.items() if off <= self.parameters.doorway_margin_m]
+        near = [f.key for f in level if f.inside(x, y, self.parameters.doorway_margin_m)]
         return near, bool(near)
 
     # Visibility ------------------------------------------------------------------------
@@ -303,17 +287,13 @@ class GazePlanner:
         x = (points[:, 0:1] + self._ring[None, :, 0]).ravel()
         y = (points[:, 1:2] + self._ring[None, :, 1]).ravel()
         for key in allowed:
-            flat = self._flat.get(key)
-            if flat is None:
+            footprint = self._footprints.get(key)
+            if footprint is None:
                 continue
-            (a, c), (b, d) = flat[0]                   # local = (x, y) @ A + offset
-            (ox, oy), (sx, sy) = flat[1], flat[2]
-            lx = x * a + y * b + ox
-            ly = x * c + y * d + oy
-            out = ~((lx >= -1e-6) & (lx <= sx + 1e-6) & (ly >= -1e-6) & (ly <= sy + 1e-6))
+            out = ~footprint.inside(x, y, 1e-6)
             if not out.any():
                 return True
-            x, y = x[out], y[out]
+            x, y = x[out], y[out]           # what this room leaves to the others
         return False
 
     # Choice ------------------------------------------------------------------------------

@@ -277,7 +277,7 @@ class CameraDriverNode(Node):
         if not self._tracking_on:
             return
         point = (msg.point.x, msg.point.y, msg.point.z)
-        distance = math.sqrt(sum(v * v for v in point)) if all_finite(point) else math.nan
+        distance = math.hypot(*point) if all_finite(point) else math.nan
         # Any direction is a target: the gaze planner's handover to a card
         # more than 90 deg off the axis lies behind the image plane (z <= 0).
         if not distance >= MIN_TARGET_DISTANCE_M:

@@ -475,7 +475,7 @@ class TrackingController:
     def _search(self, now_s: float) -> HeadCommand:
         pan, tilt = self._head_now(now_s)
         wanted, level = self._sweep.step(pan)
-        if abs(self._clamp(level, self._tilt.limits) - tilt) > SEARCH_TILT_BAND_RAD:
+        if abs(level - tilt) > SEARCH_TILT_BAND_RAD:    # levels lie within the travel
             wanted = 0.0                              # the tilt first (search.py)
         pan_speed = self._pan.within_travel(pan, self._pan.nearest(wanted))
         tilt_speed = self._tilt.within_travel(tilt, self._axis_speed(self._tilt, level - tilt,

@@ -16,8 +16,9 @@ import serial
 
 ROOT = Path(__file__).resolve().parents[2]
 FIELD_S = 0.02
-# Slack for a loaded test machine on top of the modelled delays.
-SLACK_S = 0.06
+# Slack for a loaded test machine on top of the modelled delays (upper
+# bounds only; 0.06 s was exceeded with make test beside a benchmark).
+SLACK_S = 0.2
 
 
 class Link:
@@ -118,7 +119,8 @@ def link(camera):
 
 def test_startup_address_set_if_clear_and_network_change(tmp_path):
     path = str(tmp_path / 'ttyVISCA')
-    with EmulatedEviD31(init_s=0.3, link_path=path) as cam:
+    # Initialising long enough for the asks below on a loaded machine.
+    with EmulatedEviD31(init_s=1.0, link_path=path) as cam:
         assert os.path.islink(path) and os.readlink(path).startswith('/dev/pts/')
         port = Link(cam.port)
         # Nothing addressed is answered before Address Set.
@@ -474,13 +476,14 @@ def test_ntsc_field_rate_paces_commands(tmp_path):
 
 def test_output_paced_at_9600_baud(link, camera):
     link.serial.timeout = 1.0
-    camera.send_garbage(bytes(100))
-    first = link.serial.read(1)
+    # Timed from the send: a reader woken late by a loaded machine can only
+    # make it longer, never shorter than the wire allows.
     start = time.monotonic()
-    rest = link.serial.read(99)
+    camera.send_garbage(bytes(100))
+    received = link.serial.read(100)
     elapsed = time.monotonic() - start
-    assert first + rest == bytes(100)
-    assert 99 * 1.04e-3 * 0.95 < elapsed < 99 * 1.04e-3 + SLACK_S
+    assert received == bytes(100)
+    assert 99 * 1.04e-3 * 0.95 < elapsed < 100 * 1.04e-3 + SLACK_S
 
 
 # Fault injection -----------------------------------------------------------------------

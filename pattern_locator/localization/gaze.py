@@ -29,7 +29,10 @@ A card is **predicted visible** when
 Among the candidates the best has the lowest **score**: its distance
 (a fix's error grows with it) times a penalty for obliquity
 (``1 + view_weight (1 / cos(view) - 1)``), plus ``slew_weight_m_per_rad``
-per radian the head must turn to it. **Handover**: the current card is
+per radian the head must turn to it; a card to turn to (new, handover,
+better) that is predicted gone ``stay_horizon_s`` ahead costs
+``leave_weight_m`` more: each handover is a blind slew, so the head takes
+the card it can keep. **Handover**: the current card is
 kept while it stays predicted visible ``lookahead_s`` ahead (the base's
 twist carried forward) and no other card scores better than
 ``switch_ratio`` times its score; when it is about to leave the view the
@@ -95,6 +98,11 @@ class GazeParameters:
     # gets there (at this pan speed, the EVI-D31's fastest) and this long after.
     slew_rate_deg_s: float = 80.0
     min_dwell_s: float = 0.5
+    # Every handover is blind for a slew: among the cards to turn to, one
+    # predicted gone ``stay_horizon_s`` ahead (the twist carried forward)
+    # costs this much more, so the head takes the card it can keep.
+    stay_horizon_s: float = 4.0
+    leave_weight_m: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -340,6 +348,21 @@ class GazePlanner:
             current = next((o for o in now if o.ids.as_tuple() == key), None)
         later: Dict[float, set] = {}
 
+        def visible_at(horizon: float) -> set:
+            """Return the ids of the cards predicted visible ``horizon`` s ahead (cached)."""
+            if horizon not in later:
+                options = self.options(T_building_base @ _moved(twist, horizon), room_hint,
+                                       exclude)
+                later[horizon] = {o.ids.as_tuple() for o in options}
+            return later[horizon]
+
+        def cost(option: CardOption) -> float:
+            """Return the option's score plus the cost of a handover soon after."""
+            if ahead_pose is None or p.stay_horizon_s <= p.lookahead_s or p.leave_weight_m <= 0:
+                return option.score
+            gone = option.ids.as_tuple() not in visible_at(p.stay_horizon_s)
+            return option.score + (p.leave_weight_m if gone else 0.0)
+
         def lasts(option: CardOption) -> bool:
             """Whether the card is still in sight once the head has turned to it, and a dwell."""
             if ahead_pose is None or head_pan is None or p.slew_rate_deg_s <= 0.0:
@@ -349,11 +372,9 @@ class GazePlanner:
             if horizon <= p.lookahead_s and option.ids.as_tuple() in ahead_ids:
                 return True
             horizon = math.ceil(horizon / LASTS_STEP_S) * LASTS_STEP_S
-            if horizon not in later:
-                options = self.options(T_building_base @ _moved(twist, horizon), room_hint,
-                                       exclude)
-                later[horizon] = {o.ids.as_tuple() for o in options}
-            return option.ids.as_tuple() in later[horizon]
+            return option.ids.as_tuple() in visible_at(horizon)
+
+        staying.sort(key=cost)
 
         if current is None:
             best = next((o for o in staying if lasts(o)), None)
@@ -375,7 +396,7 @@ class GazePlanner:
             if other is not None:
                 return GazeChoice(other, 'handover', True)
             return GazeChoice(current, 'keep', False)
-        if others and others[0].score < p.switch_ratio * current.score and lasts(others[0]):
+        if others and cost(others[0]) < p.switch_ratio * cost(current) and lasts(others[0]):
             return GazeChoice(others[0], 'better', True)
         return GazeChoice(current, 'keep', True)
 

@@ -247,6 +247,9 @@ _GAZE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
     'slew_rate_deg_s': ("the head's pan speed in a slew: a card is taken only if still in sight "
                         'when the head gets there (deg/s; 0: not checked)', 0.0, 1000.0),
     'min_dwell_s': ('... and this long after (s)', 0.0, 60.0),
+    'stay_horizon_s': ('a card to turn to that is predicted gone this far ahead costs '
+                       'leave_weight_m more (s; at most lookahead_s: not checked)', 0.0, 60.0),
+    'leave_weight_m': ('... this much (m)', 0.0, 100.0),
 }
 
 # Groups of parameters declared from a core's dataclass, one per field.

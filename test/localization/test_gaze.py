@@ -129,6 +129,23 @@ def test_no_handover_to_a_card_gone_before_the_head_gets_there():
     assert (handed.ids.as_tuple(), handed.reason) == ((4, 3, 6), 'handover')
 
 
+def test_the_head_takes_the_card_it_can_keep():
+    # Driving north through room 6 at 0.3 m/s: card 5 scores best now but is
+    # predicted gone within gaze.stay_horizon_s (4 s); card 4 stays. Every
+    # handover is a blind slew: take card 4. Without the leave cost, card 5.
+    T, twist = pose(20.0, 15.0, 90.0), BaseTwist((0.3, 0.0, 0.0), (0.0, 0.0, 0.0))
+    in_4_s = T @ Pose(np.eye(3), np.array([1.2, 0.0, 0.0]))
+    later = {o.ids.as_tuple() for o in PLANNER.options(in_4_s)}
+    assert (4, 6, 5) not in later and (4, 6, 4) in later
+    choice = PLANNER.choose(T, None, twist, head_pan=0.0)
+    assert (choice.ids.as_tuple(), choice.reason) == ((4, 6, 4), 'new')
+    plain = GazePlanner(BUILDING, parameters=GazeParameters(leave_weight_m=0.0))
+    first = plain.choose(T, None, twist, head_pan=0.0)
+    assert first.ids.as_tuple() == (4, 6, 5) and first.option.score < choice.option.score
+    # Standing still there is no ahead to judge by: the best score.
+    assert PLANNER.choose(T, None, None, head_pan=0.0).ids.as_tuple() == (4, 6, 5)
+
+
 def test_in_a_doorway_both_rooms_count():
     rooms, doorway = PLANNER.rooms_at(pose(9.0, 7.4, 90.0))       # room 3's door
     assert doorway and set(rooms) == {(4, 3), (4, 9)}

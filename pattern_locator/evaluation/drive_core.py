@@ -14,8 +14,9 @@ and plays the robot's parts the way the nodes will, without ROS:
   (0-16 ms) and the OS (:class:`JointTiming`); the angles are quantised to
   the camera's units. Then it aims the head: the gaze planner's card from
   the last fix carried forward by odometry (``OdomBridge``), the
-  feed-forward rates that cancel the base's motion plus a proportional
-  term, quantised to speed steps; zoom so that the card is about a quarter
+  feed-forward rates that cancel the base's motion plus the driver's
+  correction (``tracking.controller.wanted_rate``: the gain, fast slews),
+  quantised to speed steps; zoom so that the card is about a quarter
   of the image wide. Without a pose, or with no card predicted, it sweeps.
   With ``--driver target`` the driver is map-free, as the camera_driver
   node: it centres the locator's target (``TargetChooser``, what the
@@ -64,7 +65,8 @@ from ..localization.odom import BaseTwist, OdomBridge, OdomBuffer
 from ..localization.target_choice import biggest_seen, seen_cards, TargetChooser
 from ..localization.uncertainty import chi2_95, UncertaintyParameters
 from ..sim.floor_sim import Exposure, FloorSim
-from ..tracking.controller import pan_aim_in_travel
+from ..tracking.controller import (joint_aim_to_point, pan_aim_in_travel, TrackingParams,
+                                   wanted_rate)
 from ..visca.zoom_table import ZoomTable
 from ..vision.geometry import Pose, rotation_vector
 
@@ -357,11 +359,12 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
             ff_pan, ff_tilt = feed_forward_rates(head, target, twist)
         except ValueError:
             pass
-    gain = 3.0
-    # Both within the travel (less than a turn): the plain difference is the
-    # way the head can go; a wrapped one could point through the stop.
-    pan_rate = ff_pan + gain * (choice.pan - pan_now)
-    tilt_rate = ff_tilt + gain * (choice.tilt - tilt_now)
+    # The driver's law (gain, slews); both within the travel (less than a
+    # turn): the plain difference is the way the head can go; a wrapped one
+    # could point through the stop.
+    law = TrackingParams(control_period_s=timing.period_s)
+    pan_rate = wanted_rate(choice.pan - pan_now, ff_pan, law)
+    tilt_rate = wanted_rate(choice.tilt - tilt_now, ff_tilt, law)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
                      _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
     # Zoom: the card a quarter of the image wide, changed only when off by a quarter.
@@ -384,10 +387,10 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
     """
     One cycle of a map-free driver: centre the locator's latest target, else hold, else sweep.
 
-    The target's aim is the head's angles at the image's stamp plus the
-    target's direction (``-atan2(x, z)``, ``-atan2(y, hypot(x, z))``), carried
-    to now by the feed-forward rates of the base's twist (odometry), plus a
-    proportional term.
+    The target's aim is the head's angles that centre the target's point
+    from the head at the image's stamp (as the driver's), carried
+    to now by the feed-forward rates of the base's twist (odometry), plus
+    the driver's correction.
     """
     stamp, pan_read, tilt_read = reading
     rp, rt = sim_head.rates_at(t)
@@ -408,8 +411,10 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
         return zoom, search_dir
     point, pan_s, tilt_s = target.target
     x, y, z = point
-    aim_pan = pan_aim_in_travel(pan_s - math.atan2(x, z), head.pan_limits_rad)
-    aim_tilt = tilt_s - math.atan2(y, math.hypot(x, z))
+    # As the driver does (TrackingController.on_target_point).
+    aim_pan, aim_tilt = joint_aim_to_point(pan_s, tilt_s, head.mount_pitch_rad, point)
+    aim_pan = pan_aim_in_travel(pan_s + math.remainder(aim_pan - pan_s, 2.0 * math.pi),
+                                head.pan_limits_rad)
     ff_pan = ff_tilt = 0.0
     twist = odom.twist_at(t - 0.02) if odom is not None else None
     if twist is not None:
@@ -419,9 +424,9 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
         except ValueError:
             pass
     aim_pan, aim_tilt = head.clamp(aim_pan + ff_pan * age, aim_tilt + ff_tilt * age)
-    gain = 3.0
-    pan_rate = ff_pan + gain * (aim_pan - pan_now)
-    tilt_rate = ff_tilt + gain * (aim_tilt - tilt_now)
+    law = TrackingParams(control_period_s=timing.period_s)     # the driver's gain and slews
+    pan_rate = wanted_rate(aim_pan - pan_now, ff_pan, law)
+    tilt_rate = wanted_rate(aim_tilt - tilt_now, ff_tilt, law)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
                      _quantise(tilt_rate, TILT_STEP_RAD_S, TILT_STEPS))
     distance = math.sqrt(x * x + y * y + z * z)

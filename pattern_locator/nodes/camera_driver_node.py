@@ -59,7 +59,7 @@ from sensor_msgs.msg import CameraInfo, JointState
 from std_srvs.srv import Trigger
 
 from .image_codec import camera_from_info, fill_camera_info
-from .ros_helpers import (all_finite, describe_values, head_motion_to_point, Param, Parameters,
+from .ros_helpers import (all_finite, describe_values, Param, Parameters,
                           ProblemLog, quote, run_node, stamp_key, stamp_seconds, wall_timer)
 from ..card.pattern import load_pattern_config
 from ..errors import ConfigError, PatternLocatorError
@@ -76,10 +76,10 @@ CAMERA_INFO_HISTORY = 60
 BACKOFF_MAX_S = 5.0
 
 TRACKING_PARAMETERS = (
-    'gain', 'dead_band_deg', 'max_pan_speed_deg_s', 'max_tilt_speed_deg_s', 'pan_limits_deg',
-    'tilt_limits_deg', 'target_timeout_s', 'search', 'search_ahead_first', 'search_after_s',
-    'search_speed_deg_s', 'search_tilt_levels_deg', 'zoom_control', 'target_size_px',
-    'rate_hz', 'odometry_feed_forward', 'head_mount_pitch_deg')
+    'gain', 'slew_band_deg', 'slew_decel_deg_s2', 'dead_band_deg', 'max_pan_speed_deg_s',
+    'max_tilt_speed_deg_s', 'pan_limits_deg', 'tilt_limits_deg', 'target_timeout_s', 'search',
+    'search_ahead_first', 'search_after_s', 'search_speed_deg_s', 'search_tilt_levels_deg',
+    'zoom_control', 'target_size_px', 'rate_hz', 'odometry_feed_forward', 'head_mount_pitch_deg')
 
 PARAMETERS: Tuple[Param, ...] = (
     Param('port', '/dev/ttyUSB0', 'serial port of the camera'),
@@ -92,6 +92,11 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('tracking', True, 'keep pattern_locator/target centred', dynamic=True),
     Param('gain', 3.0, 'speed = card rate + gain * angular error (1/s)', 0.1, 20.0,
           dynamic=True),
+    Param('slew_band_deg', 3.0, 'further off: close the error as fast as the head can '
+          'without entering this band within a cycle (0: the gain everywhere)', 0.0, 90.0,
+          dynamic=True),
+    Param('slew_decel_deg_s2', 200.0, "the head's braking for the slews (deg/s^2)", 10.0,
+          10000.0, dynamic=True),
     Param('dead_band_deg', 0.3, 'no correction inside this error', 0.0, 10.0, dynamic=True),
     Param('max_pan_speed_deg_s', 80.0, 'pan speed limit', 3.4, 80.0, dynamic=True),
     Param('max_tilt_speed_deg_s', 50.0, 'tilt speed limit', 2.5, 50.0, dynamic=True),
@@ -138,7 +143,9 @@ def tracking_params(p: Dict[str, Any]) -> TrackingParams:
         return tuple(values)
 
     return TrackingParams(
-        gain=p['gain'], dead_band_rad=math.radians(p['dead_band_deg']),
+        gain=p['gain'], slew_band_rad=math.radians(p['slew_band_deg']),
+        slew_decel_rad_s2=math.radians(p['slew_decel_deg_s2']),
+        dead_band_rad=math.radians(p['dead_band_deg']),
         resume_band_rad=2.0 * math.radians(p['dead_band_deg']),
         max_pan_speed=math.radians(p['max_pan_speed_deg_s']),
         max_tilt_speed=math.radians(p['max_tilt_speed_deg_s']),
@@ -284,7 +291,6 @@ class CameraDriverNode(Node):
             self.problems.report('target', f'ignored a target that is not a finite point away '
                                  f'from the camera: {quote(point)}')
             return
-        pan_error, tilt_error = head_motion_to_point(*point)
         # The card's apparent size: its outer ring's radius over its distance,
         # at the focal length of the image's time (a zoom camera's changes).
         focal = self._focal_by_stamp.get(stamp_key(msg.header.stamp), self._focal)
@@ -292,8 +298,7 @@ class CameraDriverNode(Node):
         if focal is not None:
             size = focal * self.card_radius_m / distance
         self.targets += 1
-        self.loop.on_target(stamp_seconds(msg.header.stamp), pan_error, tilt_error, size,
-                            distance)
+        self.loop.on_target_point(stamp_seconds(msg.header.stamp), point, size)
 
     def _on_odometry(self, msg: Odometry) -> None:
         q = msg.pose.pose.orientation

@@ -3,9 +3,11 @@ Keep a card on the optical axis of the pan/tilt head (ROS-free core of the track
 
 The camera driver feeds a :class:`TrackingController` with
 
-* the locator's targets (:meth:`TrackingController.on_target`): for the
-  image taken at ``stamp_s``, the head motion that would centre the card
-  *as seen in that image*, and the card's apparent size;
+* the locator's targets (:meth:`TrackingController.on_target_point`, or
+  :meth:`TrackingController.on_target`): for the image taken at
+  ``stamp_s``, the card's centre in that image's optical frame (or the
+  head motion that would centre the card *as seen in that image*), and
+  the card's apparent size;
 * the head's readings (:meth:`TrackingController.on_head_state`) from
   position inquiries, stamped when the position was read;
 
@@ -23,8 +25,10 @@ always multiples of the EVI-D31's speed steps (:data:`PAN_STEP_RAD_S`,
 
 Latency: a target describes the head's position when the image was taken,
 and the head has moved since. Each target is turned into an absolute aim
-direction in joint angles, ``aim = head_at(stamp_s) + error`` (the head's
-angles at the image's stamp interpolated from the readings), and the loop
+direction in joint angles: the angles that centre the point from the head
+at ``stamp_s`` (:func:`joint_aim_to_point`; near the axis, ``aim =
+head_at(stamp_s) + error``), the head's angles at the image's stamp
+interpolated from the readings; and the loop
 drives the head (its latest reading, moved on at the speed last commanded)
 towards the aim. A straight-line fit over the recent aims gives the card's
 angular rate, which is fed forward and carries the aim up to now, so a
@@ -66,10 +70,10 @@ from .params import (PAN_MAX_STEPS, PAN_STEP_RAD_S, quantise_speed, step_range, 
 from .search import SEARCH_TILT_BAND_RAD, SearchSweep
 from .zoom import ZOOM_STOP, ZOOM_TELE_UNITS, ZOOM_WIDE_UNITS, ZoomControl
 
-__all__ = ['HeadCommand', 'MODE_HOLD', 'MODE_IDLE', 'MODE_SEARCH', 'MODE_TRACK', 'MODES',
-           'pan_aim_in_travel', 'PAN_MAX_STEPS', 'PAN_STEP_RAD_S', 'quantise_speed',
-           'TILT_MAX_STEPS', 'TILT_STEP_RAD_S', 'TrackingController', 'TrackingParams',
-           'ZOOM_TELE_UNITS', 'ZOOM_WIDE_UNITS']
+__all__ = ['HeadCommand', 'joint_aim_to_point', 'MODE_HOLD', 'MODE_IDLE', 'MODE_SEARCH',
+           'MODE_TRACK', 'MODES', 'pan_aim_in_travel', 'PAN_MAX_STEPS', 'PAN_STEP_RAD_S',
+           'quantise_speed', 'TILT_MAX_STEPS', 'TILT_STEP_RAD_S', 'TrackingController',
+           'TrackingParams', 'wanted_rate', 'ZOOM_TELE_UNITS', 'ZOOM_WIDE_UNITS']
 
 MODE_TRACK = 'track'
 MODE_HOLD = 'hold'
@@ -90,6 +94,53 @@ def pan_aim_in_travel(aim: float, limits: Tuple[float, float]) -> float:
     lo, hi = limits
     return min((aim, aim - 2.0 * math.pi, aim + 2.0 * math.pi),
                key=lambda a: max(lo - a, a - hi, 0.0))
+
+
+def joint_aim_to_point(pan: float, tilt: float, mount_pitch: float,
+                       point: Sequence[float]) -> Tuple[float, float]:
+    """
+    Return the head's (pan, tilt) (rad, REP 103) that put a point on the optical axis.
+
+    ``point``: in ``camera_optical_frame`` (x right, y down, z forward) of a
+    head at ``pan``, ``tilt``, its camera pitched up by ``mount_pitch`` on
+    the tilt link; any direction, also behind the image plane. The point is
+    turned into the pan joint's frame and aimed at from there. Adding the
+    point's angles in the image to the joint angles is right only near the
+    axis: a card 100 deg round, seen from a camera pitched up 20 deg, would
+    put the tilt 40 deg off. The optical centre's few centimetres off the
+    axes are left out (a card is metres away; its next image corrects them).
+    """
+    x, y, z = (float(v) for v in point)
+    # Optical (x right, y down, z forward) -> camera body (x forward, y left, z up).
+    fx, fy, fz = z, -x, -y
+    pitch = tilt + mount_pitch
+    c, s = math.cos(pitch), math.sin(pitch)
+    fx, fz = fx * c - fz * s, fx * s + fz * c
+    c, s = math.cos(pan), math.sin(pan)
+    fx, fy = fx * c - fy * s, fx * s + fy * c
+    return math.atan2(fy, fx), math.atan2(fz, math.hypot(fx, fy)) - mount_pitch
+
+
+def wanted_rate(error: float, rate: float, params: TrackingParams) -> float:
+    """
+    Return the speed (rad/s) an axis wants for an error (rad) and its card's rate (rad/s).
+
+    Within ``params.slew_band_rad``: the card's rate plus the gain times the
+    error. Beyond it (a handover's slew, blind anyway), the gain's
+    exponential tail would add tenths of a second of smeared images: as fast as
+    can be held for a control period and still be braked at
+    ``params.slew_decel_rad_s2`` before the band.
+    """
+    p = params
+    size = abs(error)
+    if p.slew_band_rad <= 0.0 or size <= p.slew_band_rad:
+        return rate + p.gain * error
+    # The speed held for a control period and then braked at the
+    # deceleration covers exactly the distance to the band:
+    # v T + v^2 / (2 a) = beyond.
+    a, period = p.slew_decel_rad_s2, p.control_period_s
+    fast = a * (math.sqrt(period * period + 2.0 * (size - p.slew_band_rad) / a) - period)
+    return rate + math.copysign(max(p.gain * size, fast), error)
 
 
 @dataclass(frozen=True)
@@ -170,6 +221,7 @@ class TrackingController:
       minus the head's angle now (the latest reading, moved on at the speed
       last commanded: the controller assumes its commands are executed);
       speed = rate + gain * error, rounded to the nearest speed step;
+      beyond ``slew_band_rad`` (a slew) faster: :func:`wanted_rate`;
     * dead band: once the error is inside ``dead_band_rad`` the axis only
       follows the card's rate (a still card: it stops), until the error
       leaves ``resume_band_rad``;
@@ -286,8 +338,30 @@ class TrackingController:
         no head reading yet, a value is not finite, or a newer target was
         already taken.
         """
-        values = (stamp_s, pan_error, tilt_error) + (() if size_px is None else (size_px,)) + (
-            () if distance_m is None else (distance_m,))
+        return self._add_target(stamp_s, (pan_error, tilt_error), None, size_px, distance_m)
+
+    def on_target_point(self, stamp_s: float, point: Sequence[float],
+                        size_px: Optional[float] = None) -> bool:
+        """
+        Add the card's centre in the optical frame of the image taken at ``stamp_s``.
+
+        As :meth:`on_target`, with the aim exact for any direction
+        (:func:`joint_aim_to_point`, the head's angles at the stamp and the
+        mount's pitch) and the distance from the point. Returns False (and
+        ignores it) as :meth:`on_target` does, and for a point at the camera.
+        """
+        values = tuple(float(v) for v in point)
+        if len(values) != 3:
+            return False
+        return self._add_target(stamp_s, None, values, size_px,
+                                math.sqrt(sum(v * v for v in values)))
+
+    def _add_target(self, stamp_s: float, errors: Optional[Tuple[float, float]],
+                    point: Optional[Tuple[float, float, float]], size_px: Optional[float],
+                    distance_m: Optional[float]) -> bool:
+        values = ((stamp_s,) + tuple(errors or ()) + tuple(point or ())
+                  + (() if size_px is None else (size_px,))
+                  + (() if distance_m is None else (distance_m,)))
         if not all(math.isfinite(float(v)) for v in values):
             return False
         if distance_m is not None and float(distance_m) <= 0.0:
@@ -302,9 +376,15 @@ class TrackingController:
             if self._aims and stamp_s <= self._aims.newest[0]:
                 return False
             head_pan, head_tilt = self._head.at(stamp_s)
-            aim = (self._clamp(pan_aim_in_travel(head_pan + float(pan_error), self._pan.limits),
-                               self._pan.limits),
-                   self._clamp(head_tilt + float(tilt_error), self._tilt.limits))
+            if point is not None:
+                aim_pan, aim_tilt = joint_aim_to_point(head_pan, head_tilt,
+                                                       self._params.mount_pitch_rad, point)
+                # Unwrapped near the head: the travel check below picks the turn.
+                aim_pan = head_pan + math.remainder(aim_pan - head_pan, 2.0 * math.pi)
+            else:
+                aim_pan, aim_tilt = head_pan + float(errors[0]), head_tilt + float(errors[1])
+            aim = (self._clamp(pan_aim_in_travel(aim_pan, self._pan.limits), self._pan.limits),
+                   self._clamp(aim_tilt, self._tilt.limits))
             in_odom = self._odometry_at(stamp_s)
             if in_odom != self._aims_in_odom:
                 # The aims' frame changes: the old ones no longer compare.
@@ -457,7 +537,7 @@ class TrackingController:
         closing = [(v, (v - rate) * sign) for v in axis.levels]
         fits = [v for v, c in closing if c > 0.0 and c * p.control_period_s <= size]
         if fits:
-            return axis.nearest(rate + p.gain * error, fits)
+            return axis.nearest(wanted_rate(error, rate, p), fits)
         slowest = min(((c, v) for v, c in closing if c > 0.0), default=None)
         if slowest is not None and slowest[0] * p.control_period_s <= 1.5 * size:
             return slowest[1]

@@ -183,6 +183,14 @@ class HeadLoop:
             return False
         return controller.on_target(stamp_s, pan_error, tilt_error, size_px, distance_m)
 
+    def on_target_point(self, stamp_s: float, point: Tuple[float, float, float],
+                        size_px: Optional[float]) -> bool:
+        """Pass a target point (the image's optical frame) to the controller; False if ignored."""
+        controller = self.controller
+        if controller is None:
+            return False
+        return controller.on_target_point(stamp_s, point, size_px)
+
     def reset_tracking(self) -> None:
         """Forget the controller's history (after a reconnect or a home/reset)."""
         if self.controller is not None:

@@ -74,6 +74,11 @@ class TrackingParams:
     Settings of the tracking loop (SI units, radians; validated on creation).
 
     * ``gain`` (1/s): speed = card rate + gain * error.
+    * ``slew_band_rad``: further off than this (a handover's slew, blind
+      anyway) an axis closes its error as fast as it can stop at the band:
+      not past it within a control period, nor faster than braking at
+      ``slew_decel_rad_s2`` allows; within it, the gain. 0: the gain
+      everywhere.
     * ``dead_band_rad``: an axis whose error falls inside it stops
       correcting, and starts again only when the error leaves
       ``resume_band_rad`` (hysteresis).
@@ -112,6 +117,8 @@ class TrackingParams:
     """
 
     gain: float = 3.0
+    slew_band_rad: float = math.radians(3.0)
+    slew_decel_rad_s2: float = math.radians(200.0)
     dead_band_rad: float = math.radians(0.3)
     resume_band_rad: float = math.radians(0.6)
     max_pan_speed: float = math.radians(80.0)
@@ -141,12 +148,12 @@ class TrackingParams:
         def put(name, value):
             object.__setattr__(self, name, value)
 
-        for name in ('gain', 'max_pan_speed', 'max_tilt_speed', 'min_pan_speed',
-                     'min_tilt_speed', 'control_period_s', 'target_timeout_s',
+        for name in ('gain', 'slew_decel_rad_s2', 'max_pan_speed', 'max_tilt_speed',
+                     'min_pan_speed', 'min_tilt_speed', 'control_period_s', 'target_timeout_s',
                      'head_timeout_s', 'search_after_s', 'search_pan_speed',
                      'target_size_px', 'zoom_max_error_rad', 'odometry_timeout_s'):
             put(name, _positive(name, getattr(self, name)))
-        for name in ('dead_band_rad', 'resume_band_rad', 'rate_window_s'):
+        for name in ('dead_band_rad', 'resume_band_rad', 'rate_window_s', 'slew_band_rad'):
             put(name, _positive(name, getattr(self, name), allow_zero=True))
         for name in ('search_enabled', 'search_ahead_first', 'zoom_enabled',
                      'odometry_feed_forward'):

@@ -6,11 +6,13 @@ import random
 from typing import Callable, List, Optional, Tuple
 
 from pattern_locator.errors import ConfigError
-from pattern_locator.tracking.controller import (HeadCommand, MODE_HOLD, MODE_IDLE, MODE_SEARCH,
-                                                 MODE_TRACK, pan_aim_in_travel, PAN_MAX_STEPS,
+from pattern_locator.localization.head import HeadGeometry
+from pattern_locator.tracking.controller import (HeadCommand, joint_aim_to_point, MODE_HOLD,
+                                                 MODE_IDLE, MODE_SEARCH, MODE_TRACK,
+                                                 pan_aim_in_travel, PAN_MAX_STEPS,
                                                  PAN_STEP_RAD_S, quantise_speed, TILT_MAX_STEPS,
                                                  TILT_STEP_RAD_S, TrackingController,
-                                                 TrackingParams, ZOOM_TELE_UNITS)
+                                                 TrackingParams, wanted_rate, ZOOM_TELE_UNITS)
 import pytest
 
 DEG = math.pi / 180.0
@@ -475,6 +477,47 @@ def test_a_card_just_past_half_a_turn_is_reached_the_way_the_travel_allows():
     assert pan_aim_in_travel(-250 * DEG, (-100 * DEG, 100 * DEG)) == pytest.approx(110 * DEG)
 
 
+def test_the_aim_at_a_point_is_exact_in_every_direction():
+    # The head's own kinematics (no link offsets) put the axis on a point 5 m
+    # out; seen from another pose of the head, the aim must come back to it,
+    # also more than 90 deg round and with the camera pitched on its link.
+    rng = random.Random(3)
+    for _ in range(300):
+        mount = rng.uniform(-25, 25) * DEG
+        head = HeadGeometry(pan_to_tilt_xyz=(0.0, 0.0, 0.0), tilt_to_optical_xyz=(0.0, 0.0, 0.0),
+                            mount_pitch_rad=mount)
+        aim = (rng.uniform(-100, 100) * DEG, rng.uniform(-25, 25) * DEG)
+        now = (rng.uniform(-100, 100) * DEG, rng.uniform(-25, 25) * DEG)
+        in_base = head.T_base_camera(*aim).apply([[0.0, 0.0, 5.0]])
+        point = head.T_base_camera(*now).inverse().apply(in_base)[0]
+        pan, tilt = joint_aim_to_point(now[0], now[1], mount, point)
+        assert math.remainder(pan - aim[0], 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+        assert tilt == pytest.approx(aim[1], abs=1e-9)
+
+
+def test_a_target_far_round_is_aimed_at_with_the_tilt_it_needs():
+    # Camera pitched up 15 deg on its link, head at 80 deg left and 10 deg up;
+    # the card straight ahead of the base (pan 0) at tilt 5 deg. Adding the
+    # point's angles in the image would aim the tilt 20 deg too high.
+    mount = 15 * DEG
+    head = HeadGeometry(pan_to_tilt_xyz=(0.0, 0.0, 0.0), tilt_to_optical_xyz=(0.0, 0.0, 0.0),
+                        mount_pitch_rad=mount)
+    in_base = head.T_base_camera(0.0, 5 * DEG).apply([[0.0, 0.0, 6.0]])
+    point = head.T_base_camera(80 * DEG, 10 * DEG).inverse().apply(in_base)[0]
+    ctrl = controller(mount_pitch_rad=mount)
+    still_head(ctrl, pan=80 * DEG, tilt=10 * DEG)
+    assert ctrl.on_target_point(0.95, point, 60.0)
+    command = ctrl.update(1.0)
+    assert command.pan_error == pytest.approx(-80 * DEG, abs=1e-6)
+    assert command.tilt_error == pytest.approx(-5 * DEG, abs=1e-6)
+    assert command.pan_steps < 0 and command.tilt_steps < 0
+    old_tilt = 10 * DEG - math.atan2(point[1], math.hypot(point[0], point[2]))
+    assert abs(old_tilt - 5 * DEG) > 10 * DEG
+    # Not a point: ignored.
+    assert not ctrl.on_target_point(1.0, (0.0, 0.0, 0.0), 60.0)
+    assert not ctrl.on_target_point(1.0, (math.nan, 0.0, 1.0), 60.0)
+
+
 def test_search_can_be_disabled():
     ctrl = controller(search_enabled=False)
     still_head(ctrl, until_s=10.0)
@@ -534,6 +577,39 @@ def test_closed_loop_centres_a_card_15_deg_off_and_stays(seed):
     assert result.max_error_after(centred) < 1 * DEG
     assert result.time_to_within(0.5 * DEG) < 2.0
     assert result.reversals(0) <= 1 and result.reversals(1) <= 1
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_a_slew_reaches_the_card_sooner_than_the_gain_and_does_not_overshoot(seed):
+    # A handover 22 deg right and 15 deg down: the gain alone closes it in an
+    # exponential (a smeared quarter second more); the slew runs near the
+    # steps' top speed and brakes into the band (planned at 200 deg/s^2) on
+    # a head that accelerates at 300 deg/s^2 (the simulation's).
+    def card(t):
+        return (-22 * DEG, -15 * DEG)
+    times = {}
+    for band in (0.0, 3.0):
+        params = TrackingParams(control_period_s=1.0 / 15.0, slew_band_rad=band * DEG)
+        result = simulate(card, duration_s=4.0, params=params, seed=seed)
+        times[band] = result.time_to_within(3 * DEG)
+        centred = result.time_to_within(1 * DEG)
+        assert result.max_error_after(centred) < 1 * DEG
+        assert result.reversals(0) <= 1 and result.reversals(1) <= 1
+    assert times[3.0] < times[0.0] - 0.1
+
+
+def test_the_wanted_rate_is_the_gain_within_the_band_and_brakes_beyond_it():
+    p = TrackingParams(control_period_s=0.1, slew_band_rad=3 * DEG,
+                       slew_decel_rad_s2=200 * DEG)
+    assert wanted_rate(2 * DEG, 0.5 * DEG, p) == pytest.approx(0.5 * DEG + 6 * DEG)
+    # 13 deg off, 10 beyond the band: v held 0.1 s, then braked at 200 deg/s^2,
+    # covers the 10 deg: 0.1 v + v^2 / 400 = 10, v = 46.3 deg/s.
+    v = wanted_rate(-13 * DEG, 0.0, p) / DEG
+    assert v == pytest.approx(-46.33, abs=0.01)
+    assert 0.1 * abs(v) + v * v / 400.0 == pytest.approx(10.0)
+    assert wanted_rate(4 * DEG, 0.0, p) == pytest.approx(12 * DEG)      # the gain is faster
+    off = TrackingParams(control_period_s=0.1, slew_band_rad=0.0)
+    assert wanted_rate(-13 * DEG, 0.0, off) == pytest.approx(-39 * DEG)
 
 
 @pytest.mark.parametrize('seed', [0, 1])

@@ -92,8 +92,10 @@ class GazeParameters:
     view_weight: float = 1.0
     # A slew is blind (the card smeared beyond reading) for about its angle
     # over 80 deg/s: 3 m/rad found 0.2-0.7 points of fix coverage more than
-    # 1 on the loop route (bench --drive-core, target driver, seeds 1-2).
-    slew_weight_m_per_rad: float = 3.0
+    # 1 on the loop route (bench --drive-core, target driver, seeds 1-2); with
+    # the fast slews and the leave cost, 5 m/rad 1.0 and 0.1 points more
+    # than 3 (8: 1.5 and -0.2).
+    slew_weight_m_per_rad: float = 5.0
     # A card is worth turning to only if it is still in sight when the head
     # gets there (at this pan speed, the EVI-D31's fastest) and this long after.
     slew_rate_deg_s: float = 80.0

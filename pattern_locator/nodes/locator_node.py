@@ -87,8 +87,15 @@ from ..vision.overlay import draw_overlay
 
 THROTTLE_S = 5.0
 CAMERA_INFO_HISTORY = 60
-# An image that overtook its own camera_info waits this long for it.
-CAMERA_INFO_WAIT_S = 0.05
+# An image that overtook its own camera_info waits this long for it (a
+# loaded machine delayed it by more than 50 ms: see _camera_for).
+CAMERA_INFO_WAIT_S = 0.2
+# Without its own camera_info an image takes the latest only if the last
+# this many that came agree (a camera not zooming).
+CAMERA_INFO_STEADY = 3
+# After this many images in a row without their own camera_info the camera
+# is taken not to stamp camera_info with its images: no more waiting.
+CAMERA_INFO_MISSES = 10
 # A joint state this much older than the newest one means the clock went back
 # (a bag replayed again, a simulator restarted): the history starts afresh.
 CLOCK_JUMP_S = 1.0
@@ -299,6 +306,13 @@ def gaze_parameters(values: Dict[str, Any]) -> GazeParameters:
     return GazeParameters(**_group(values, 'gaze'))
 
 
+def _same_intrinsics(a: Optional[CameraModel], b: Optional[CameraModel]) -> bool:
+    """Return whether two camera_infos give the same intrinsics (None: refused, never)."""
+    return (a is not None and b is not None and (a.width, a.height) == (b.width, b.height)
+            and a.distortion_model == b.distortion_model
+            and np.array_equal(a.K, b.K) and np.array_equal(a.D, b.D))
+
+
 def rejection_reasons(result: FrameResult) -> Sequence[str]:
     """
     Return a short reason key per problem of a frame, for the diagnostics' counts.
@@ -396,9 +410,14 @@ class LocatorNode(Node):
         self._cameras_by_stamp: 'collections.OrderedDict[int, Optional[CameraModel]]' = \
             collections.OrderedDict()
         self._camera_problem = 'no camera_info received yet'
+        # Why the last image had no intrinsics of its own (see _camera_for).
+        self._camera_problem_late = ''
         self._info_arrived = threading.Condition()
-        # Whether camera_info comes with the images' stamps (see _camera_for).
-        self._info_synchronised = False
+        # Images in a row without a camera_info of their stamp (see _camera_for).
+        self._info_misses = CAMERA_INFO_MISSES
+        # The intrinsics of the last camera_infos as they came (see _camera_for).
+        self._recent_cameras: 'collections.deque[Optional[CameraModel]]' = \
+            collections.deque(maxlen=CAMERA_INFO_STEADY)
         self._joint_arrived = threading.Condition()
         # The oldest joint state since the history (re)started: an image before
         # it has no head angles yet and waits for the warm-up.
@@ -549,6 +568,7 @@ class LocatorNode(Node):
     def _remember_camera(self, key: int, camera: Optional[CameraModel]) -> None:
         with self._info_arrived:
             self._cameras_by_stamp[key] = camera
+            self._recent_cameras.append(camera)
             while len(self._cameras_by_stamp) > CAMERA_INFO_HISTORY:
                 self._cameras_by_stamp.popitem(last=False)
             self._info_arrived.notify_all()
@@ -703,10 +723,11 @@ class LocatorNode(Node):
         with self._stats_lock:
             self.stats['processed'] += 1
         self._times['queue'].append((started - arrival) * 1000.0)
+        self._camera_problem_late = ''
         camera = self._camera_for(stamp_key(msg.header.stamp))
         if camera is False:
-            self.problems.report('camera_info', 'no location for an image whose own '
-                                 'camera_info was refused')
+            self.problems.report('camera_info', self._camera_problem_late or (
+                'no location for an image whose own camera_info was refused'))
             return
         if camera is None:
             self.problems.report('camera_info', self._camera_problem)
@@ -748,23 +769,33 @@ class LocatorNode(Node):
         """
         Return the intrinsics of an image's stamp: its own, else the latest (None: none).
 
-        False when its own camera_info was refused. While camera_info comes
-        with the images' stamps (a driver publishing both), an image that
-        overtook its own camera_info waits a little for it: a zoom camera's
-        previous intrinsics would be wrong for it.
+        False when its own camera_info was refused, and when it did not come
+        while the intrinsics change. While camera_info comes with the
+        images' stamps (a driver publishing both), an image that overtook
+        its own camera_info waits a little for it: a zoom camera's previous
+        intrinsics would be wrong for it (a focal length 11 % off put a fix
+        27 cm out along the line of sight, its covariance saying 3 mm).
+        Should it not come, the latest serve only if the last few agree.
         """
         deadline = time.monotonic() + CAMERA_INFO_WAIT_S
         with self._info_arrived:
-            while key not in self._cameras_by_stamp and self._info_synchronised:
+            while key not in self._cameras_by_stamp and self._info_misses < CAMERA_INFO_MISSES:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0 or self._stopping:
                     break
                 self._info_arrived.wait(remaining)
-        if key in self._cameras_by_stamp:
-            self._info_synchronised = True
-            camera = self._cameras_by_stamp[key]
-            return False if camera is None else camera
-        self._info_synchronised = False
+            if key in self._cameras_by_stamp:
+                self._info_misses = 0
+                camera = self._cameras_by_stamp[key]
+                return False if camera is None else camera
+            self._info_misses = min(self._info_misses + 1, CAMERA_INFO_MISSES)
+            recent = list(self._recent_cameras)
+        if any(not _same_intrinsics(c, recent[-1]) for c in recent):
+            self._camera_problem_late = (
+                f"no location: the image's own camera_info did not come within "
+                f'{CAMERA_INFO_WAIT_S * 1000.0:.0f} ms and the intrinsics are changing '
+                f'(a zooming camera): the latest would be wrong for it')
+            return False
         return self.camera
 
     def _head_motion(self, msg: Image) -> Optional[HeadMotion]:

@@ -230,6 +230,35 @@ def test_each_image_uses_the_camera_info_of_its_own_stamp(locator, graph):
     assert position_error(pose[0]) < 0.04
 
 
+def test_no_location_when_its_own_camera_info_is_missing_while_the_zoom_changes(locator,
+                                                                             graph):
+    # The camera_infos of two earlier frames differ (the camera zooms) and the
+    # image's own never comes (a loaded machine): the latest would put the
+    # fix out along the line of sight with a covariance of millimetres.
+    node, executor, publishers, received = graph
+    assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0, 20.0)
+    image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+    first = info_msg(CAMERA)
+    first.header.stamp.sec = 900
+    zoomed = info_msg(CAMERA)
+    zoomed.header.stamp.sec = 901
+    zoomed.k = [1.1 * v if i in (0, 4) else v for i, v in enumerate(first.k)]
+    zoomed.p = [1.1 * v if i in (0, 5) else v for i, v in enumerate(first.p)]
+
+    def refused():
+        return 'intrinsics are changing' in locator.log.read_text()
+
+    deadline = time.monotonic() + 8.0
+    while not refused() and time.monotonic() < deadline:
+        publishers['info'].publish(first)
+        publishers['info'].publish(zoomed)
+        spin_until(executor, lambda: False, 0.05)
+        publishers['image'].publish(image_msg(image, 902))
+        spin_until(executor, refused, 1.0)
+    assert refused(), locator.log.read_text()
+    assert not any(m.header.stamp.sec == 902 for m in received['pose'])
+
+
 class ParameterClient:
     """rclpy clients of a node's parameter services (what ``ros2 param`` uses)."""
 

@@ -230,8 +230,7 @@ def test_each_image_uses_the_camera_info_of_its_own_stamp(locator, graph):
     assert position_error(pose[0]) < 0.04
 
 
-def test_no_location_when_its_own_camera_info_is_missing_while_the_zoom_changes(locator,
-                                                                             graph):
+def test_no_location_when_its_own_camera_info_is_missing_while_zooming(locator, graph):
     # The camera_infos of two earlier frames differ (the camera zooms) and the
     # image's own never comes (a loaded machine): the latest would put the
     # fix out along the line of sight with a covariance of millimetres.

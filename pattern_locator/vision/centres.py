@@ -63,10 +63,16 @@ class SpotMeasures:
     area: np.ndarray        # (P,) equivalent area of the dot, pixels
     inside: np.ndarray      # (P,) window fully inside the image
     partial: Optional[np.ndarray] = None    # (P,) colour read from an uncovered part only
+    # (P,) the first, generous centroid near where the homography put the
+    # spot (as a dot's last centroid must be): a spot printed there, not
+    # the edge of an object beside the place, whose darkness pulls it off.
+    centred: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.partial is None:
             object.__setattr__(self, 'partial', np.zeros(len(self.valid), dtype=bool))
+        if self.centred is None:
+            object.__setattr__(self, 'centred', np.ones(len(self.valid), dtype=bool))
 
 
 @dataclass(frozen=True)
@@ -262,6 +268,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     for g in groups:
         _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
                     core_margin, out)
+    # The tolerance of the last pass's test of a dot's centre (spot_kernels.last_pass).
+    out.centred[:] = np.hypot(*(out.points - pred).T) <= np.maximum(1.5, 0.3 * major + 1.0)
     if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)

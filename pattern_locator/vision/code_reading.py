@@ -235,12 +235,14 @@ def handedness(marks: SpotMeasures, black_peak: float) -> str:
 
     ``marks`` holds the m marks then their m mirror images. A position shows
     a mark when it holds a dark, isolated, dot-sized spot at least half as
-    dark as point 1 where the mark belongs. A mark where one belongs and
-    none at any mirror image says the card is seen directly; the reverse
-    says a mirror. An object over some of these places only hides them.
+    dark as point 1, centred where the mark belongs. A mark where one
+    belongs and none at any mirror image says the card is seen directly;
+    the reverse says a mirror. An object over some of these places only
+    hides them; one beside a place (its edge a pixel or two from it) is
+    dark there too, but its darkness is not centred on the place.
     """
     m = len(marks.valid) // 2
-    present = marks.valid & (marks.peak >= 0.5 * black_peak)
+    present = marks.valid & marks.centred & (marks.peak >= 0.5 * black_peak)
     if np.any(present[m:]):
         return 'unsure' if np.any(present[:m]) else 'mirror'
     return 'ok' if np.any(present[:m]) else 'unsure'

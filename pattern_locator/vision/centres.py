@@ -215,7 +215,8 @@ class _Windows:
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
                   core_margin: Optional[float] = None, refine: bool = True,
-                  enough: Optional[Callable[[np.ndarray], bool]] = None) -> SpotMeasures:
+                  enough: Optional[Callable[[np.ndarray], bool]] = None,
+                  min_darkness: Optional[float] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -229,6 +230,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     ``enough`` (given the spots valid after the first windows) stops there
     when it says no: the refinement only ever drops spots, so a caller that
     needs more than the first windows found needs nothing more.
+    ``min_darkness`` (default ``params.min_window_darkness``): how much
+    darker than the paper a spot must be (a fraction of the white).
     """
     params = dot_image.params
     if core_margin is None:
@@ -266,7 +269,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
               for index, scale in ((np.flatnonzero(~big), 1),
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
-        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
+        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper,
+                    params.min_window_darkness if min_darkness is None else min_darkness,
                     core_margin, out)
     # The tolerance of the last pass's test of a dot's centre (spot_kernels.last_pass).
     out.centred[:] = np.hypot(*(out.points - pred).T) <= np.maximum(1.5, 0.3 * major + 1.0)
@@ -282,7 +286,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
 
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
-                paper: Paper, params: DetectorParams, core_margin: float,
+                paper: Paper, min_darkness: float, core_margin: float,
                 out: SpotMeasures) -> None:
     """
     Centroid in a generous window, and the tests of a dot, written into ``out``.
@@ -304,7 +308,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
         g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
         layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
         dot_image.white_at(pred[:, 0], pred[:, 1]).astype(np.float32), quiet, core_margin,
-        params.min_window_darkness, out.points, out.valid, out.peak, out.area, out.inside)
+        min_darkness, out.points, out.valid, out.peak, out.area, out.inside)
     g.sigma = sigma
 
 

@@ -33,8 +33,10 @@ from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
 from ..errors import CodeError
 
 LETTERS = 'KRGB'
-# Crosstalk values tried when fitting the camera's colour response.
-_CROSSTALK = np.linspace(0.0, 0.45, 7)
+# Crosstalk values tried when fitting the camera's colour response. Up to
+# 0.6 (2/3 is grey): besides a sensor's overlapping filters, JPEG's colour
+# at half resolution greys a far card's dots of a few pixels as much.
+_CROSSTALK = np.linspace(0.0, 0.6, 9)
 
 
 @dataclass(frozen=True)

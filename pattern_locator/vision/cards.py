@@ -118,13 +118,17 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     # than the noise round it (a speck of texture or of a dark noisy frame
     # is not), darkest first. The noise is measured where it is lowest
     # nearby, but a far card is too small to hold a quiet place: its own
-    # dots' edges (and a busy background) make it, so a spot as dark as ink
-    # is (at least 40 % below the white, blurred and decimated; the
-    # segmentation's cap is half) is sure whatever that noise says.
+    # dots' edges (and a busy background) make it. So a spot as dark as
+    # ink is (at least 40 % below the white, blurred and decimated; the
+    # segmentation's cap is half) is sure whatever that noise says, unless
+    # such spots are more than could be tried: a texture's specks.
     u, v = blobs.u[idx], blobs.v[idx]
     white, noise = dot_image.white_at(u, v), dot_image.noise_at(u, v)
     dark = dot_image.peak_darkness(u, v, white)
-    sure = dark * white >= np.minimum(_FAR_MIN_CONTRAST * noise, _FAR_INK_DARKNESS * white)
+    sure = dark * white >= _FAR_MIN_CONTRAST * noise
+    inky = ~sure & (dark >= _FAR_INK_DARKNESS)
+    if np.count_nonzero(inky) <= _FAR_TRIES:
+        sure |= inky
     if not np.any(sure):
         return np.zeros(0, dtype=np.intp)
     pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]

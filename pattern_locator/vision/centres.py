@@ -280,7 +280,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     for g in groups:
         _last_pass(g, layout, spots, blur, major, minor, pred, out)
     if colour and dot_image.image.ndim == 3:
-        _colours(groups, paper.colour, params, major, minor, out)
+        _colours(groups, paper.colour, params, major, minor, layout, spots, out)
     return out
 
 
@@ -360,7 +360,8 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
 
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
-             major: np.ndarray, minor: np.ndarray, out: SpotMeasures) -> None:
+             major: np.ndarray, minor: np.ndarray, layout: PlaneLayout, spots: np.ndarray,
+             out: SpotMeasures) -> None:
     """
     Per-channel darkness of every spot, where that channel's image of it is.
 
@@ -384,12 +385,12 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             g.pixels, table, g.cell, g.window, g.connected, g.axes, g.c, g.pred, g.base,
             g.scale, g.index, major, minor, params.max_channel_shift_px, out.valid, out.readable,
             out.colour, channel_at, strength)
-        _uncovered_part(g, dark, major, minor, out)
+        _uncovered_part(g, dark, major, minor, layout, spots, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
 
 
 def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,
-                    out: SpotMeasures) -> None:
+                    layout: PlaneLayout, spots: np.ndarray, out: SpotMeasures) -> None:
     """
     Colour of dots partly covered by an object, from the part of them that shows.
 
@@ -402,16 +403,27 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
     the blur has not mixed with it), and only when there is enough of it
     and it is even. Such dots are marked ``partial``: the code reading asks
     more of them (:func:`~.code_reading.read_code`).
+
+    A dot touched by an object (not valid, but read for its colour since
+    its inner part is even) may be even because the object covers it, and
+    a partial reading may be the object's edge: a colour that is the
+    object's is not the ink's. The object's colour for that is taken where
+    paper should be anywhere in the window, not only in the dot's share
+    (the neighbours' shares cut an object off), from its darker half (not
+    its blurred edge). A black object over a coloured dot was read as
+    black: a second point 1, or a wrong one.
     """
     idx = g.index
     sure = out.valid[idx]
-    todo = ~out.readable[idx] & out.inside[idx] & (minor[idx] >= 2.5)
-    if np.count_nonzero(sure) < 3 or not np.any(todo):
+    fit = out.inside[idx] & (minor[idx] >= 2.5)
+    todo = ~out.readable[idx] & fit
+    touched = out.readable[idx] & ~sure & ~out.partial[idx] & fit
+    if np.count_nonzero(sure) < 3 or not np.any(todo | touched):
         return
     ink = float(median(out.colour[idx][sure].max(axis=1)))
     axes = np.column_stack([major[idx], minor[idx]]) / g.scale
     ellipse = g.ellipse(g.pred, axes)
-    for j in np.flatnonzero(todo):
+    for j in np.flatnonzero(todo | touched):
         e, cell, b = ellipse[j], g.cell[j], axes[j, 1]
         # Inside the dot clear of its blurred rim (a pixel and a half).
         inner = cell & (e <= max((b - 1.5) / b, 0.4) ** 2)
@@ -419,6 +431,13 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
         pix = spot_kernels.box3(dark[j])                      # (S, S, 3) 3x3 mean darkness
         strength = pix.max(axis=2)
+        obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
+        if touched[j]:
+            if obj is None or np.linalg.norm(out.colour[idx[j]] - obj) >= 0.3 * ink:
+                continue
+            # The object's colour, not the ink's: perhaps some ink shows.
+            out.readable[idx[j]] = False
+            out.colour[idx[j]] = np.nan
         if np.count_nonzero(inner) < 6:
             continue
         stain = ring & (strength > 0.15)
@@ -436,9 +455,37 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         mean = chosen.mean(axis=0)
         if np.max(chosen.std(axis=0)) > 0.05 + 0.1 * mean.max():
             continue
+        if obj is not None and np.linalg.norm(mean - obj) < 0.3 * ink:
+            continue
         out.colour[idx[j]] = mean
         out.readable[idx[j]] = True
         out.partial[idx[j]] = True
+
+
+def _object_colour(pix: np.ndarray, strength: np.ndarray, paper: np.ndarray
+                   ) -> Optional[np.ndarray]:
+    """Return the colour of what is dark where ``paper`` should be (its darker half); None if little."""
+    stain = paper & (strength > 0.15)
+    if np.count_nonzero(stain) < 4:
+        return None
+    s = strength[stain]
+    return median(pix[stain][s >= median(s)], axis=0)
+
+
+def _paper(g: _Windows, j: int, layout: PlaneLayout, spots: np.ndarray) -> np.ndarray:
+    """Return window ``j``'s pixels that should be paper: on the card, 3 pixels clear of all ink."""
+    size = g.size
+    k = np.arange(size, dtype=np.float64)
+    dx, dy = k[None, :] - g.pred[j, 0], k[:, None] - g.pred[j, 1]
+    A = g.to_plane[j].astype(np.float64)                # metres per source pixel
+    q0 = layout.points[spots[g.index[j]]]
+    qx = q0[0] + A[0, 0] * dx + A[0, 1] * dy
+    qy = q0[1] + A[1, 0] * dx + A[1, 1] * dy
+    room = 3.0 * np.sqrt(abs(np.linalg.det(A)))          # three source pixels, metres
+    ink = np.min(np.hypot(qx[..., None] - layout.points[:, 0],
+                          qy[..., None] - layout.points[:, 1]) - layout.radii, axis=-1)
+    edge = layout.half - np.maximum(np.abs(qx), np.abs(qy))
+    return (ink > room) & (edge > room) & g.in_image[j]
 
 
 def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: float,

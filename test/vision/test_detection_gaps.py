@@ -10,7 +10,7 @@ mirror image still gives no id. Nothing is timed.
 import math
 
 import numpy as np
-from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
                                         MirroredTexture, Occluder, render_scene, RenderOptions)
 from pattern_locator.vision import cards as card_stage
@@ -131,3 +131,28 @@ def test_far_card_in_a_jpeg_frame_is_read_with_greyer_colours():
     assert ids_found(image, VGA) == [frame['ids']]
     mirror, _ = render(**frame, mirrored=True)
     assert ids_found(mirror, VGA) == []
+
+
+# Occlusion: a black object over a corner of the card, covering most of an
+# inner ring dot. Even under the object, that dot was read for its colour:
+# black, a second point 1 (or, with point 1's own dots hidden, a wrong
+# one). Its colour is the object's, as seen where paper should be round it.
+BLACK_CORNER = {
+    'camera': HD, 'distance': 3.6741, 'tilt': 32.1841, 'azimuth': 279.044, 'roll': -24.854,
+    'offset': (194.659, 202.63), 'ids': (7, 6, 4), 'gain': 1.0116,
+    'colour_cast': (1.0154, 1.026, 0.9623), 'gradient': 0.1899, 'gradient_angle_deg': 80.1185,
+    'defocus_sigma_px': 0.8892, 'noise_sigma': 2.6698, 'shot_noise': 0.0008,
+    'crosstalk': 0.0052, 'background': 'clutter', 'seed': 845405580,
+    'occluders': [([[0.15, 0.15], [-0.05426, 0.15], [0.15, -0.05426]], (0.05, 0.05, 0.06))]}
+
+
+def test_dot_under_a_black_object_is_not_read_as_black():
+    frame = BLACK_CORNER
+    image, _ = render(**frame)
+    code = CFG.encode(*frame['ids'])
+    # Points 1 and 2 are hidden: a map completes them; its other card
+    # differs in a slot that shows (point 6).
+    near = Code(code.centre, code.ring[:5] + ('G' if code.ring[5] != 'G' else 'B') + code.ring[6:])
+    detector = Detector(CFG, known_codes=[code, CFG.encode(0, 1, 1), near])
+    found = [c.ids.as_tuple() for c in detector.detect(image, HD) if c.ids is not None]
+    assert found == [frame['ids']]

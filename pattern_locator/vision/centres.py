@@ -464,7 +464,7 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
 
 def _object_colour(pix: np.ndarray, strength: np.ndarray, paper: np.ndarray
                    ) -> Optional[np.ndarray]:
-    """Return the colour of what is dark where ``paper`` should be (its darker half); None if little."""
+    """Return the colour of what is dark where ``paper`` should be (its darker half), or None."""
     stain = paper & (strength > 0.15)
     if np.count_nonzero(stain) < 4:
         return None
@@ -473,7 +473,7 @@ def _object_colour(pix: np.ndarray, strength: np.ndarray, paper: np.ndarray
 
 
 def _paper(g: _Windows, j: int, layout: PlaneLayout, spots: np.ndarray) -> np.ndarray:
-    """Return window ``j``'s pixels that should be paper: on the card, 3 pixels clear of all ink."""
+    """Return window ``j``'s pixels that should be paper: on the card, 3 pixels from any ink."""
     size = g.size
     k = np.arange(size, dtype=np.float64)
     dx, dy = k[None, :] - g.pred[j, 0], k[:, None] - g.pred[j, 1]

@@ -431,8 +431,9 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
         pix = spot_kernels.box3(dark[j])                      # (S, S, 3) 3x3 mean darkness
         strength = pix.max(axis=2)
-        obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
+        obj = None
         if touched[j]:
+            obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
             if obj is None or np.linalg.norm(out.colour[idx[j]] - obj) >= 0.3 * ink:
                 continue
             # The object's colour, not the ink's: perhaps some ink shows.
@@ -455,6 +456,8 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         mean = chosen.mean(axis=0)
         if np.max(chosen.std(axis=0)) > 0.05 + 0.1 * mean.max():
             continue
+        if obj is None:
+            obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
         if obj is not None and np.linalg.norm(mean - obj) < 0.3 * ink:
             continue
         out.colour[idx[j]] = mean

@@ -35,8 +35,10 @@ from ..errors import CodeError
 LETTERS = 'KRGB'
 # Crosstalk values tried when fitting the camera's colour response. Up to
 # 0.6 (2/3 is grey): besides a sensor's overlapping filters, JPEG's colour
-# at half resolution greys a far card's dots of a few pixels as much.
-_CROSSTALK = np.linspace(0.0, 0.6, 9)
+# at half resolution greys a far card's dots of a few pixels as much. In
+# steps of 0.05: greyer inks are closer together, and a coarser grid left
+# the response that explains such dots between two of its values.
+_CROSSTALK = np.linspace(0.0, 0.6, 13)
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,8 @@ _FAR_MIN_AREA = 8.0
 _FAR_TRIES = 8
 _FAR_EXTRA = 3
 _FAR_MIN_CONTRAST = 9.0     # noise sigmas
+# ...or this fraction of the white, whatever the noise: ink is that dark.
+_FAR_INK_DARKNESS = 0.4
 
 
 @dataclass(frozen=True)
@@ -114,11 +116,19 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     idx = np.flatnonzero(ok)
     # A centre dot is ink, the darkest thing on the card: clearly darker
     # than the noise round it (a speck of texture or of a dark noisy frame
-    # is not), darkest first.
+    # is not), darkest first. The noise is measured where it is lowest
+    # nearby, but a far card is too small to hold a quiet place: its own
+    # dots' edges (and a busy background) make it. So a spot as dark as
+    # ink is (at least 40 % below the white, blurred and decimated; the
+    # segmentation's cap is half) is sure whatever that noise says, unless
+    # such spots are more than could be tried: a texture's specks.
     u, v = blobs.u[idx], blobs.v[idx]
     white, noise = dot_image.white_at(u, v), dot_image.noise_at(u, v)
     dark = dot_image.peak_darkness(u, v, white)
     sure = dark * white >= _FAR_MIN_CONTRAST * noise
+    inky = ~sure & (dark >= _FAR_INK_DARKNESS)
+    if np.count_nonzero(inky) <= _FAR_TRIES:
+        sure |= inky
     if not np.any(sure):
         return np.zeros(0, dtype=np.intp)
     pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]

@@ -63,10 +63,16 @@ class SpotMeasures:
     area: np.ndarray        # (P,) equivalent area of the dot, pixels
     inside: np.ndarray      # (P,) window fully inside the image
     partial: Optional[np.ndarray] = None    # (P,) colour read from an uncovered part only
+    # (P,) the first, generous centroid near where the homography put the
+    # spot (as a dot's last centroid must be): a spot printed there, not
+    # the edge of an object beside the place, whose darkness pulls it off.
+    centred: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.partial is None:
             object.__setattr__(self, 'partial', np.zeros(len(self.valid), dtype=bool))
+        if self.centred is None:
+            object.__setattr__(self, 'centred', np.ones(len(self.valid), dtype=bool))
 
 
 @dataclass(frozen=True)
@@ -209,7 +215,8 @@ class _Windows:
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
                   core_margin: Optional[float] = None, refine: bool = True,
-                  enough: Optional[Callable[[np.ndarray], bool]] = None) -> SpotMeasures:
+                  enough: Optional[Callable[[np.ndarray], bool]] = None,
+                  min_darkness: Optional[float] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -223,6 +230,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     ``enough`` (given the spots valid after the first windows) stops there
     when it says no: the refinement only ever drops spots, so a caller that
     needs more than the first windows found needs nothing more.
+    ``min_darkness`` (default ``params.min_window_darkness``): how much
+    darker than the paper a spot must be (a fraction of the white).
     """
     params = dot_image.params
     if core_margin is None:
@@ -260,21 +269,24 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
               for index, scale in ((np.flatnonzero(~big), 1),
                                    (np.flatnonzero(big), dot_image.scale)) if len(index)]
     for g in groups:
-        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper, params,
+        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper,
+                    params.min_window_darkness if min_darkness is None else min_darkness,
                     core_margin, out)
+    # The tolerance of the last pass's test of a dot's centre (spot_kernels.last_pass).
+    out.centred[:] = np.hypot(*(out.points - pred).T) <= np.maximum(1.5, 0.3 * major + 1.0)
     if not refine or (enough is not None and not enough(out.valid)):
         return out
     blur = _blur(groups, U, major, minor, out.valid)
     for g in groups:
         _last_pass(g, layout, spots, blur, major, minor, pred, out)
     if colour and dot_image.image.ndim == 3:
-        _colours(groups, paper.colour, params, major, minor, out)
+        _colours(groups, paper.colour, params, major, minor, layout, spots, out)
     return out
 
 
 def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
                 pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
-                paper: Paper, params: DetectorParams, core_margin: float,
+                paper: Paper, min_darkness: float, core_margin: float,
                 out: SpotMeasures) -> None:
     """
     Centroid in a generous window, and the tests of a dot, written into ``out``.
@@ -296,7 +308,7 @@ def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np
         g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
         layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
         dot_image.white_at(pred[:, 0], pred[:, 1]).astype(np.float32), quiet, core_margin,
-        params.min_window_darkness, out.points, out.valid, out.peak, out.area, out.inside)
+        min_darkness, out.points, out.valid, out.peak, out.area, out.inside)
     g.sigma = sigma
 
 
@@ -348,7 +360,8 @@ def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.nda
 
 
 def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
-             major: np.ndarray, minor: np.ndarray, out: SpotMeasures) -> None:
+             major: np.ndarray, minor: np.ndarray, layout: PlaneLayout, spots: np.ndarray,
+             out: SpotMeasures) -> None:
     """
     Per-channel darkness of every spot, where that channel's image of it is.
 
@@ -372,12 +385,12 @@ def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
             g.pixels, table, g.cell, g.window, g.connected, g.axes, g.c, g.pred, g.base,
             g.scale, g.index, major, minor, params.max_channel_shift_px, out.valid, out.readable,
             out.colour, channel_at, strength)
-        _uncovered_part(g, dark, major, minor, out)
+        _uncovered_part(g, dark, major, minor, layout, spots, out)
     _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
 
 
 def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,
-                    out: SpotMeasures) -> None:
+                    layout: PlaneLayout, spots: np.ndarray, out: SpotMeasures) -> None:
     """
     Colour of dots partly covered by an object, from the part of them that shows.
 
@@ -390,16 +403,27 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
     the blur has not mixed with it), and only when there is enough of it
     and it is even. Such dots are marked ``partial``: the code reading asks
     more of them (:func:`~.code_reading.read_code`).
+
+    A dot touched by an object (not valid, but read for its colour since
+    its inner part is even) may be even because the object covers it, and
+    a partial reading may be the object's edge: a colour that is the
+    object's is not the ink's. The object's colour for that is taken where
+    paper should be anywhere in the window, not only in the dot's share
+    (the neighbours' shares cut an object off), from its darker half (not
+    its blurred edge). A black object over a coloured dot was read as
+    black: a second point 1, or a wrong one.
     """
     idx = g.index
     sure = out.valid[idx]
-    todo = ~out.readable[idx] & out.inside[idx] & (minor[idx] >= 2.5)
-    if np.count_nonzero(sure) < 3 or not np.any(todo):
+    fit = out.inside[idx] & (minor[idx] >= 2.5)
+    todo = ~out.readable[idx] & fit
+    touched = out.readable[idx] & ~sure & ~out.partial[idx] & fit
+    if np.count_nonzero(sure) < 3 or not np.any(todo | touched):
         return
     ink = float(median(out.colour[idx][sure].max(axis=1)))
     axes = np.column_stack([major[idx], minor[idx]]) / g.scale
     ellipse = g.ellipse(g.pred, axes)
-    for j in np.flatnonzero(todo):
+    for j in np.flatnonzero(todo | touched):
         e, cell, b = ellipse[j], g.cell[j], axes[j, 1]
         # Inside the dot clear of its blurred rim (a pixel and a half).
         inner = cell & (e <= max((b - 1.5) / b, 0.4) ** 2)
@@ -407,6 +431,14 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         ring = cell & g.on_card[j] & (e >= ((b + 2.0) / b) ** 2)
         pix = spot_kernels.box3(dark[j])                      # (S, S, 3) 3x3 mean darkness
         strength = pix.max(axis=2)
+        obj = None
+        if touched[j]:
+            obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
+            if obj is None or np.linalg.norm(out.colour[idx[j]] - obj) >= 0.3 * ink:
+                continue
+            # The object's colour, not the ink's: perhaps some ink shows.
+            out.readable[idx[j]] = False
+            out.colour[idx[j]] = np.nan
         if np.count_nonzero(inner) < 6:
             continue
         stain = ring & (strength > 0.15)
@@ -424,9 +456,39 @@ def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.
         mean = chosen.mean(axis=0)
         if np.max(chosen.std(axis=0)) > 0.05 + 0.1 * mean.max():
             continue
+        if obj is None:
+            obj = _object_colour(pix, strength, ring | _paper(g, j, layout, spots))
+        if obj is not None and np.linalg.norm(mean - obj) < 0.3 * ink:
+            continue
         out.colour[idx[j]] = mean
         out.readable[idx[j]] = True
         out.partial[idx[j]] = True
+
+
+def _object_colour(pix: np.ndarray, strength: np.ndarray, paper: np.ndarray
+                   ) -> Optional[np.ndarray]:
+    """Return the colour of what is dark where ``paper`` should be (its darker half), or None."""
+    stain = paper & (strength > 0.15)
+    if np.count_nonzero(stain) < 4:
+        return None
+    s = strength[stain]
+    return median(pix[stain][s >= median(s)], axis=0)
+
+
+def _paper(g: _Windows, j: int, layout: PlaneLayout, spots: np.ndarray) -> np.ndarray:
+    """Return window ``j``'s pixels that should be paper: on the card, 3 pixels from any ink."""
+    size = g.size
+    k = np.arange(size, dtype=np.float64)
+    dx, dy = k[None, :] - g.pred[j, 0], k[:, None] - g.pred[j, 1]
+    A = g.to_plane[j].astype(np.float64)                # metres per source pixel
+    q0 = layout.points[spots[g.index[j]]]
+    qx = q0[0] + A[0, 0] * dx + A[0, 1] * dy
+    qy = q0[1] + A[1, 0] * dx + A[1, 1] * dy
+    room = 3.0 * np.sqrt(abs(np.linalg.det(A)))          # three source pixels, metres
+    ink = np.min(np.hypot(qx[..., None] - layout.points[:, 0],
+                          qy[..., None] - layout.points[:, 1]) - layout.radii, axis=-1)
+    edge = layout.half - np.maximum(np.abs(qx), np.abs(qy))
+    return (ink > room) & (edge > room) & g.in_image[j]
 
 
 def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: float,

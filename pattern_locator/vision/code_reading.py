@@ -33,8 +33,12 @@ from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
 from ..errors import CodeError
 
 LETTERS = 'KRGB'
-# Crosstalk values tried when fitting the camera's colour response.
-_CROSSTALK = np.linspace(0.0, 0.45, 7)
+# Crosstalk values tried when fitting the camera's colour response. Up to
+# 0.6 (2/3 is grey): besides a sensor's overlapping filters, JPEG's colour
+# at half resolution greys a far card's dots of a few pixels as much. In
+# steps of 0.05: greyer inks are closer together, and a coarser grid left
+# the response that explains such dots between two of its values.
+_CROSSTALK = np.linspace(0.0, 0.6, 13)
 
 
 @dataclass(frozen=True)
@@ -235,12 +239,14 @@ def handedness(marks: SpotMeasures, black_peak: float) -> str:
 
     ``marks`` holds the m marks then their m mirror images. A position shows
     a mark when it holds a dark, isolated, dot-sized spot at least half as
-    dark as point 1 where the mark belongs. A mark where one belongs and
-    none at any mirror image says the card is seen directly; the reverse
-    says a mirror. An object over some of these places only hides them.
+    dark as point 1, centred where the mark belongs. A mark where one
+    belongs and none at any mirror image says the card is seen directly;
+    the reverse says a mirror. An object over some of these places only
+    hides them; one beside a place (its edge a pixel or two from it) is
+    dark there too, but its darkness is not centred on the place.
     """
     m = len(marks.valid) // 2
-    present = marks.valid & (marks.peak >= 0.5 * black_peak)
+    present = marks.valid & marks.centred & (marks.peak >= 0.5 * black_peak)
     if np.any(present[m:]):
         return 'unsure' if np.any(present[:m]) else 'mirror'
     return 'ok' if np.any(present[:m]) else 'unsure'

@@ -316,8 +316,6 @@ class Detector:
                 paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int) -> bool:
         """Tell whether the handedness marks show the card itself (not its mirror image)."""
         cfg = self.config
-        marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, paper,
-                              colour=False, core_margin=1.0, refine=False)
         rows = 1 + point1 + RING_POINTS * np.arange(cfg.n_rings)
         black = spots.peak[rows][valid[rows]]
         if len(black) == 0:
@@ -327,7 +325,17 @@ class Detector:
             black = spots.peak[1:][ring]
             if len(black) < 5:
                 return False
-        return handedness(marks, float(median(black))) == 'ok'
+        black_peak = float(median(black))
+        # A mark counts when at least half as dark as point 1 (handedness):
+        # that, not the dots' fixed bar, is the bar for its window too. A far
+        # card's marks, smaller than its dots, are paler than the bar when
+        # its point 1 is less than twice as dark; the same bar at the
+        # mirror images' places keeps the test symmetric.
+        marks = measure_spots(dot_image, camera, H_final, self._mark_layout, self._marks, paper,
+                              colour=False, core_margin=1.0, refine=False,
+                              min_darkness=min(self.params.min_window_darkness,
+                                               0.5 * black_peak))
+        return handedness(marks, black_peak) == 'ok'
 
 
 def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:

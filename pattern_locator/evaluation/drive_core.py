@@ -411,8 +411,12 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
         return zoom, search_dir
     point, pan_s, tilt_s = target.target
     x, y, z = point
-    # As the driver does (TrackingController.on_target_point).
-    aim_pan, aim_tilt = joint_aim_to_point(pan_s, tilt_s, head.mount_pitch_rad, point)
+    # As the driver does (TrackingController.on_target_point, which ignores
+    # a point straight above or below the head).
+    try:
+        aim_pan, aim_tilt = joint_aim_to_point(pan_s, tilt_s, head.mount_pitch_rad, point)
+    except ValueError:
+        return zoom, search_dir
     aim_pan = pan_aim_in_travel(pan_s + math.remainder(aim_pan - pan_s, 2.0 * math.pi),
                                 head.pan_limits_rad)
     ff_pan = ff_tilt = 0.0

@@ -60,15 +60,19 @@ go through :class:`~pattern_locator.tracking.history.AimTrack`.
 """
 
 from dataclasses import dataclass
+import functools
 import math
 import threading
 from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
 
 from .history import AimTrack, BaseTrack, HeadHistory, HISTORY_S
 from .params import (PAN_MAX_STEPS, PAN_STEP_RAD_S, quantise_speed, step_range, TILT_MAX_STEPS,
                      TILT_STEP_RAD_S, TrackingParams)
 from .search import SEARCH_TILT_BAND_RAD, SearchSweep
 from .zoom import ZOOM_STOP, ZOOM_TELE_UNITS, ZOOM_WIDE_UNITS, ZoomControl
+from ..localization.head import HeadGeometry
 
 __all__ = ['HeadCommand', 'joint_aim_to_point', 'MODE_HOLD', 'MODE_IDLE', 'MODE_SEARCH',
            'MODE_TRACK', 'MODES', 'pan_aim_in_travel', 'PAN_MAX_STEPS', 'PAN_STEP_RAD_S',
@@ -103,22 +107,25 @@ def joint_aim_to_point(pan: float, tilt: float, mount_pitch: float,
 
     ``point``: in ``camera_optical_frame`` (x right, y down, z forward) of a
     head at ``pan``, ``tilt``, its camera pitched up by ``mount_pitch`` on
-    the tilt link; any direction, also behind the image plane. The point is
-    turned into the pan joint's frame and aimed at from there. Adding the
+    the tilt link; any direction, also behind the image plane. Adding the
     point's angles in the image to the joint angles is right only near the
     axis: a card 100 deg round, seen from a camera pitched up 20 deg, would
-    put the tilt 40 deg off. The optical centre's few centimetres off the
-    axes are left out (a card is metres away; its next image corrects them).
+    put the tilt 40 deg off. The head's own kinematics
+    (:class:`~pattern_locator.localization.head.HeadGeometry`) without the
+    optical centre's few centimetres off the axes (a card is metres away;
+    its next image corrects them). Raises ValueError for a point on the pan
+    axis (straight above or below the head).
     """
-    x, y, z = (float(v) for v in point)
-    # Optical (x right, y down, z forward) -> camera body (x forward, y left, z up).
-    fx, fy, fz = z, -x, -y
-    pitch = tilt + mount_pitch
-    c, s = math.cos(pitch), math.sin(pitch)
-    fx, fz = fx * c - fz * s, fx * s + fz * c
-    c, s = math.cos(pan), math.sin(pan)
-    fx, fy = fx * c - fy * s, fx * s + fy * c
-    return math.atan2(fy, fx), math.atan2(fz, math.hypot(fx, fy)) - mount_pitch
+    head = _axes_only(float(mount_pitch))
+    in_base = head.T_base_camera(pan, tilt).apply(np.asarray(point, dtype=float).reshape(1, 3))
+    return head.aim_angles(in_base[0])
+
+
+@functools.lru_cache(maxsize=8)
+def _axes_only(mount_pitch: float) -> HeadGeometry:
+    """Return a head with the pan, tilt and optical axes through one point."""
+    return HeadGeometry(base_to_pan_xyz=(0.0, 0.0, 0.0), pan_to_tilt_xyz=(0.0, 0.0, 0.0),
+                        tilt_to_optical_xyz=(0.0, 0.0, 0.0), mount_pitch_rad=mount_pitch)
 
 
 def wanted_rate(error: float, rate: float, params: TrackingParams) -> float:
@@ -353,8 +360,7 @@ class TrackingController:
         values = tuple(float(v) for v in point)
         if len(values) != 3:
             return False
-        return self._add_target(stamp_s, None, values, size_px,
-                                math.sqrt(sum(v * v for v in values)))
+        return self._add_target(stamp_s, None, values, size_px, math.hypot(*values))
 
     def _add_target(self, stamp_s: float, errors: Optional[Tuple[float, float]],
                     point: Optional[Tuple[float, float, float]], size_px: Optional[float],
@@ -377,8 +383,11 @@ class TrackingController:
                 return False
             head_pan, head_tilt = self._head.at(stamp_s)
             if point is not None:
-                aim_pan, aim_tilt = joint_aim_to_point(head_pan, head_tilt,
-                                                       self._params.mount_pitch_rad, point)
+                try:
+                    aim_pan, aim_tilt = joint_aim_to_point(head_pan, head_tilt,
+                                                           self._params.mount_pitch_rad, point)
+                except ValueError:
+                    return False        # straight above or below the head: no pan aims at it
                 # Unwrapped near the head: the travel check below picks the turn.
                 aim_pan = head_pan + math.remainder(aim_pan - head_pan, 2.0 * math.pi)
             else:

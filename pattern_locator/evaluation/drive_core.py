@@ -47,6 +47,7 @@ Every figure says how many frames it rests on.
 import argparse
 import bisect
 from dataclasses import dataclass, field, replace
+import functools
 import json
 import math
 import sys
@@ -326,6 +327,12 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
     return records
 
 
+@functools.lru_cache(maxsize=4)
+def _driver_law(period_s: float) -> TrackingParams:
+    """Return the camera driver's default tracking settings at this control period."""
+    return TrackingParams(control_period_s=period_s)
+
+
 def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: OdomBuffer,
              planner: GazePlanner, head: HeadGeometry, building, current, zoom: float,
              search_dir: float, zoom_table: ZoomTable, card_size: float, timing: JointTiming,
@@ -362,7 +369,7 @@ def _control(t: float, sim_head: SimHead, reading, bridge: OdomBridge, odom: Odo
     # The driver's law (gain, slews); both within the travel (less than a
     # turn): the plain difference is the way the head can go; a wrapped one
     # could point through the stop.
-    law = TrackingParams(control_period_s=timing.period_s)
+    law = _driver_law(timing.period_s)
     pan_rate = wanted_rate(choice.pan - pan_now, ff_pan, law)
     tilt_rate = wanted_rate(choice.tilt - tilt_now, ff_tilt, law)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),
@@ -428,7 +435,7 @@ def _control_target(t: float, sim_head: SimHead, reading, target: Optional[Frame
         except ValueError:
             pass
     aim_pan, aim_tilt = head.clamp(aim_pan + ff_pan * age, aim_tilt + ff_tilt * age)
-    law = TrackingParams(control_period_s=timing.period_s)     # the driver's gain and slews
+    law = _driver_law(timing.period_s)      # the driver's gain and slews
     pan_rate = wanted_rate(aim_pan - pan_now, ff_pan, law)
     tilt_rate = wanted_rate(aim_tilt - tilt_now, ff_tilt, law)
     sim_head.command(t + latency, _quantise(pan_rate, PAN_STEP_RAD_S, PAN_STEPS),

@@ -376,7 +376,9 @@ class GazePlanner:
             horizon = math.ceil(horizon / LASTS_STEP_S) * LASTS_STEP_S
             return option.ids.as_tuple() in visible_at(horizon)
 
-        staying.sort(key=cost)
+        if len(staying) > 1:
+            # Only a choice needs the look further ahead (an options() per image).
+            staying.sort(key=cost)
 
         if current is None:
             best = next((o for o in staying if lasts(o)), None)

@@ -410,8 +410,6 @@ class LocatorNode(Node):
         self._cameras_by_stamp: 'collections.OrderedDict[int, Optional[CameraModel]]' = \
             collections.OrderedDict()
         self._camera_problem = 'no camera_info received yet'
-        # Why the last image had no intrinsics of its own (see _camera_for).
-        self._camera_problem_late = ''
         self._info_arrived = threading.Condition()
         # Images in a row without a camera_info of their stamp (see _camera_for).
         self._info_misses = CAMERA_INFO_MISSES
@@ -723,11 +721,9 @@ class LocatorNode(Node):
         with self._stats_lock:
             self.stats['processed'] += 1
         self._times['queue'].append((started - arrival) * 1000.0)
-        self._camera_problem_late = ''
         camera = self._camera_for(stamp_key(msg.header.stamp))
-        if camera is False:
-            self.problems.report('camera_info', self._camera_problem_late or (
-                'no location for an image whose own camera_info was refused'))
+        if isinstance(camera, str):
+            self.problems.report('camera_info', camera)
             return
         if camera is None:
             self.problems.report('camera_info', self._camera_problem)
@@ -769,12 +765,13 @@ class LocatorNode(Node):
         """
         Return the intrinsics of an image's stamp: its own, else the latest (None: none).
 
-        False when its own camera_info was refused, and when it did not come
-        while the intrinsics change. While camera_info comes with the
-        images' stamps (a driver publishing both), an image that overtook
-        its own camera_info waits a little for it: a zoom camera's previous
-        intrinsics would be wrong for it (a focal length 11 % off put a fix
-        27 cm out along the line of sight, its covariance saying 3 mm).
+        A string (why there is no location) when its own camera_info was
+        refused, and when it did not come while the intrinsics change. While
+        camera_info comes with the images' stamps (a driver publishing both),
+        an image that overtook its own camera_info waits a little for it: a
+        zoom camera's previous intrinsics would be wrong for it (a focal
+        length 11 % off put a fix 27 cm out along the line of sight, its
+        covariance saying 3 mm).
         Should it not come, the latest serve only if the last few agree.
         """
         deadline = time.monotonic() + CAMERA_INFO_WAIT_S
@@ -787,15 +784,14 @@ class LocatorNode(Node):
             if key in self._cameras_by_stamp:
                 self._info_misses = 0
                 camera = self._cameras_by_stamp[key]
-                return False if camera is None else camera
+                return ('no location for an image whose own camera_info was refused'
+                        if camera is None else camera)
             self._info_misses = min(self._info_misses + 1, CAMERA_INFO_MISSES)
             recent = list(self._recent_cameras)
         if any(not _same_intrinsics(c, recent[-1]) for c in recent):
-            self._camera_problem_late = (
-                f"no location: the image's own camera_info did not come within "
-                f'{CAMERA_INFO_WAIT_S * 1000.0:.0f} ms and the intrinsics are changing '
-                f'(a zooming camera): the latest would be wrong for it')
-            return False
+            return (f"no location: the image's own camera_info did not come within "
+                    f'{CAMERA_INFO_WAIT_S * 1000.0:.0f} ms and the intrinsics are changing '
+                    f'(a zooming camera): the latest would be wrong for it')
         return self.camera
 
     def _head_motion(self, msg: Image) -> Optional[HeadMotion]:

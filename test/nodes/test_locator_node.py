@@ -202,29 +202,40 @@ def test_debug_image_while_someone_looks(locator, graph):
     assert bytes(shown.data) != image.tobytes()       # something was drawn on it
 
 
+def zooming_infos(first_stamp: int, factor: float):
+    """Return camera_infos of two frames, the second's focal length ``factor`` times."""
+    first = info_msg(CAMERA)
+    first.header.stamp.sec = first_stamp
+    zoomed = info_msg(CAMERA)
+    zoomed.header.stamp.sec = first_stamp + 1
+    zoomed.k = [factor * v if i in (0, 4) else v for i, v in enumerate(first.k)]
+    zoomed.p = [factor * v if i in (0, 5) else v for i, v in enumerate(first.p)]
+    return first, zoomed
+
+
+def publish_until(graph, infos, image, stamp_s: int, done, timeout: float = 8.0) -> None:
+    """Publish the camera_infos, then the image stamped ``stamp_s``, until ``done()``."""
+    node, executor, publishers, received = graph
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        for info in infos:
+            publishers['info'].publish(info)
+        spin_until(executor, lambda: False, 0.05)
+        publishers['image'].publish(image_msg(image, stamp_s))
+        spin_until(executor, done, 1.0)
+
+
 def test_each_image_uses_the_camera_info_of_its_own_stamp(locator, graph):
     # A zooming camera: the camera_info of the next frame (other intrinsics)
     # arrives before this frame is processed; this frame must keep its own.
     node, executor, publishers, received = graph
     assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0, 20.0)
     image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
-    own = info_msg(CAMERA)
-    own.header.stamp.sec = 600
-    zoomed = info_msg(CAMERA)
-    zoomed.header.stamp.sec = 601
-    zoomed.k = [2.0 * v if i in (0, 4) else v for i, v in enumerate(own.k)]
-    zoomed.p = [2.0 * v if i in (0, 5) else v for i, v in enumerate(own.p)]
 
     def got():
         return any(m.header.stamp.sec == 600 for m in received['pose'])
 
-    deadline = time.monotonic() + 8.0
-    while not got() and time.monotonic() < deadline:
-        publishers['info'].publish(own)
-        publishers['info'].publish(zoomed)
-        spin_until(executor, lambda: False, 0.05)
-        publishers['image'].publish(image_msg(image, 600))
-        spin_until(executor, got, 1.0)
+    publish_until(graph, zooming_infos(600, 2.0), image, 600, got)
     pose = [m for m in received['pose'] if m.header.stamp.sec == 600]
     assert pose, locator.log.read_text()
     assert position_error(pose[0]) < 0.04
@@ -237,23 +248,11 @@ def test_no_location_when_its_own_camera_info_is_missing_while_zooming(locator, 
     node, executor, publishers, received = graph
     assert spin_until(executor, lambda: publishers['image'].get_subscription_count() > 0, 20.0)
     image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
-    first = info_msg(CAMERA)
-    first.header.stamp.sec = 900
-    zoomed = info_msg(CAMERA)
-    zoomed.header.stamp.sec = 901
-    zoomed.k = [1.1 * v if i in (0, 4) else v for i, v in enumerate(first.k)]
-    zoomed.p = [1.1 * v if i in (0, 5) else v for i, v in enumerate(first.p)]
 
     def refused():
         return 'intrinsics are changing' in locator.log.read_text()
 
-    deadline = time.monotonic() + 8.0
-    while not refused() and time.monotonic() < deadline:
-        publishers['info'].publish(first)
-        publishers['info'].publish(zoomed)
-        spin_until(executor, lambda: False, 0.05)
-        publishers['image'].publish(image_msg(image, 902))
-        spin_until(executor, refused, 1.0)
+    publish_until(graph, zooming_infos(900, 1.1), image, 902, refused)
     assert refused(), locator.log.read_text()
     assert not any(m.header.stamp.sec == 902 for m in received['pose'])
 

@@ -213,6 +213,7 @@ class DriveCoreConfig:
     frame_rate_hz: float = 5.0
     max_speed_m_s: float = 0.5
     exposure: str = 'blur'
+    shutter_s: Optional[float] = None     # the camera's shutter (else the exposure's 20 ms)
     covariance: str = 'model'            # 'model' | 'fisher' (the estimator's alone)
     as_hung: bool = False                 # cards off the map by a few cm, the map saying so
     seed: int = 1
@@ -223,11 +224,19 @@ class DriveCoreConfig:
     gaze: bool = True                     # the locator's target from the gaze planner
 
 
+def config_exposure(config: DriveCoreConfig) -> Exposure:
+    """Return the run's exposure: its kind, with the camera's shutter if one is set."""
+    exposure = EXPOSURES[config.exposure]
+    if config.shutter_s is not None:
+        exposure = replace(exposure, exposure_s=float(config.shutter_s))
+    return exposure
+
+
 def _uncertainty(config: DriveCoreConfig) -> Optional[UncertaintyParameters]:
     if config.covariance == 'fisher':
         return UncertaintyParameters.fisher_only()
     params = config.uncertainty or UncertaintyParameters()
-    exposure = EXPOSURES[config.exposure]
+    exposure = config_exposure(config)
     # What a node is configured with: its camera's exposure and its camera
     # link's stamp error (the default timing's is the parameters' default).
     params = replace(params, exposure_s=exposure.exposure_s,
@@ -246,7 +255,7 @@ def _uncertainty(config: DriveCoreConfig) -> Optional[UncertaintyParameters]:
 def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
     """Drive the route once; return one record per frame."""
     sim = FloorSim.floor(config.route, max_speed_m_s=config.max_speed_m_s,
-                         exposure=EXPOSURES[config.exposure], seed=config.seed,
+                         exposure=config_exposure(config), seed=config.seed,
                          as_hung_seed=config.seed if config.as_hung else None)
     world = sim.world
     building = world.building
@@ -314,7 +323,7 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
                 current, zoom, search_dir = _control(
                     t + 0.03, sim_head, last_reading, bridge, odom, planner, head, building,
                     current, zoom, search_dir, zoom_table, pattern.card_size, timing, rng)
-        if t + 1e-9 >= next_frame + 0.05 + EXPOSURES[config.exposure].exposure_s:
+        if t + 1e-9 >= next_frame + 0.05 + sim.exposure.exposure_s:
             stamp = next_frame
             next_frame += 1.0 / config.frame_rate_hz
             camera = zoom_table.camera_at(zoom)
@@ -772,6 +781,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--max-speed', type=float, default=0.5,
                         help="cap of the route legs' speed, m/s (default 0.5)")
     parser.add_argument('--exposure', choices=sorted(EXPOSURES), default='blur')
+    parser.add_argument('--shutter', type=float, default=None, metavar='S',
+                        help="the camera's shutter, s (default the auto exposure's 1/50); a "
+                             'shorter one blurs less and, with the gain making up the light, '
+                             'is noisier')
     parser.add_argument('--covariance', choices=('model', 'fisher', 'both'), default='both',
                         help="the covariance model, the estimator's alone, or both in turn")
     parser.add_argument('--joint-hz', type=float, default=10.0,
@@ -810,10 +823,11 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     if not seeds or not (0.5 <= args.rate <= 25.0) or not (0.05 <= args.max_speed <= 0.8) or (
             args.seconds is not None and not args.seconds > 0.0) or not (
-            1.0 <= args.joint_hz <= 50.0) or not (0.0 <= args.usb_latency_ms <= 200.0):
+            1.0 <= args.joint_hz <= 50.0) or not (0.0 <= args.usb_latency_ms <= 200.0) or (
+            args.shutter is not None and not 0.0001 <= args.shutter <= 0.02):
         print('bench --drive-core: need a seed, --rate within 0.5..25, --max-speed within '
-              '0.05..0.8, --seconds > 0, --joint-hz within 1..50 and --usb-latency-ms within '
-              '0..200', file=sys.stderr)
+              '0.05..0.8, --seconds > 0, --joint-hz within 1..50, --usb-latency-ms within '
+              '0..200 and --shutter within 0.0001..0.02', file=sys.stderr)
         return 2
     try:
         FloorSim.floor(args.route)
@@ -830,7 +844,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                              usb_latency_s=args.usb_latency_ms / 1000.0)
             config = DriveCoreConfig(route=args.route, seconds=args.seconds,
                                      frame_rate_hz=args.rate, max_speed_m_s=args.max_speed,
-                                     exposure=args.exposure, covariance=mode,
+                                     exposure=args.exposure, shutter_s=args.shutter,
+                                     covariance=mode,
                                      as_hung=args.as_hung, seed=seed, timing=timing,
                                      driver=args.driver, odometry=not args.no_odometry,
                                      gaze=not args.no_gaze)
@@ -841,7 +856,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         timing = ('' if (args.joint_hz, args.usb_latency_ms) == (10.0, 16.0) else
                   f', joint states {args.joint_hz:g} Hz late by <= {args.usb_latency_ms:g} ms')
         title = (f'{args.route}, seeds {",".join(map(str, seeds))}, {args.rate:g} fps, '
-                 f'<= {args.max_speed:g} m/s, {args.exposure}{timing}'
+                 f'<= {args.max_speed:g} m/s, {args.exposure}'
+                 f'{"" if args.shutter is None else f", shutter {args.shutter:g} s"}{timing}'
                  f'{", as hung" if args.as_hung else ""}, driver {args.driver}'
                  f'{", no odometry" if args.no_odometry else ""}'
                  f'{", no gaze" if args.no_gaze else ""}: covariance {mode} '

@@ -38,6 +38,8 @@ from ..vision.camera import CameraModel
 from ..vision.geometry import Pose
 
 IdsKey = Tuple[int, int, int]
+# Looks (render options) a scene keeps renderers for: a few shutters' worth.
+MAX_LOOKS = 4
 
 
 @dataclass(frozen=True)
@@ -90,7 +92,9 @@ class FloorScene:
         self.world = world
         self.head = head or HeadGeometry()
         self.options = options
-        self._renderer = BoxRenderer(options)
+        # One renderer per look (a shutter's gain changes it): each caches its
+        # background and noise per image size, so only the few looks in use.
+        self._renderers: Dict[RenderOptions, BoxRenderer] = {options: BoxRenderer(options)}
         # Card textures are built once, when a card is first drawn.
         self._faces: Dict[IdsKey, UncodedFace] = {}
         self._centres = np.array([c.T_building_card.t for c in world.cards]).reshape(-1, 3)
@@ -222,23 +226,35 @@ class FloorScene:
     # Images ---------------------------------------------------------------------------
 
     def render(self, camera: CameraModel, fields: Sequence[Field], seed: int = 0,
-               blur: bool = True) -> Tuple[np.ndarray, Dict[IdsKey, float]]:
+               blur: bool = True, options: Optional[RenderOptions] = None
+               ) -> Tuple[np.ndarray, Dict[IdsKey, float]]:
         """
         Return the BGR uint8 image and each drawn card's motion blur (pixels, frame rows).
 
         One field: a progressive frame; two: an interlaced frame, field ``p``
         in the rows of parity ``p``. ``blur=False`` draws every card sharp at
-        its field's middle pose. Deterministic for a seed.
+        its field's middle pose. ``options``: this frame's look (e.g. a
+        shutter's gain and noise, ``Exposure.image_options``), else the
+        scene's. Deterministic for a seed.
         """
         if len(fields) not in (1, 2):
             raise ConfigError(f'sim: a frame has 1 or 2 fields, got {len(fields)}')
+        renderer = self._renderer(options if options is not None else self.options)
         blurs: Dict[IdsKey, float] = {}
         if len(fields) == 1:
             cards = self._box_cards(camera, fields[0], blur, blurs, 1.0)
-            return self._renderer.render(camera, cards, seed), blurs
+            return renderer.render(camera, cards, seed), blurs
         drawn = [self._box_cards(field_camera(camera, parity), f, blur, blurs, 2.0)
                  for parity, f in enumerate(fields)]
-        return self._renderer.render_fields(camera, drawn, seed), blurs
+        return renderer.render_fields(camera, drawn, seed), blurs
+
+    def _renderer(self, options: RenderOptions) -> BoxRenderer:
+        if options not in self._renderers:
+            if len(self._renderers) >= MAX_LOOKS:
+                # Bounded: a camera stepping through shutters keeps the newest looks.
+                del self._renderers[next(k for k in self._renderers if k != self.options)]
+            self._renderers[options] = BoxRenderer(options)
+        return self._renderers[options]
 
     def render_still(self, T_building_camera: Pose, camera: CameraModel, seed: int = 0
                      ) -> np.ndarray:

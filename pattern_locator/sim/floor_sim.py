@@ -57,19 +57,55 @@ class Exposure:
     ``field_period_s`` apart, the even rows first (an analogue EVI-D31 on
     a frame grabber: PAL, 50 fields/s). ``blur``: smear cards along their
     motion during the exposure.
+
+    The camera's automatic exposure (:meth:`image_options`): the scene's
+    light is what gives the render options' brightness at ``reference_s``
+    (the EVI-D31's own shutter in full auto, 1/50 s) and unity gain. A
+    shorter shutter collects less light; the camera makes it up with gain,
+    up to ``max_gain``, and the gain amplifies the sensor's noise with the
+    signal; below what the gain can make up, the image darkens.
     """
 
     exposure_s: float = 0.02
     interlace: bool = False
     field_period_s: float = 0.02
     blur: bool = True
+    reference_s: float = 0.02
+    # +18 dB, the top of the EVI-D30/D31's gain range (?): Sony lists the
+    # range for its successors (EVI-D100: -3..+18 dB); not measured.
+    max_gain: float = 7.94
 
     def __post_init__(self) -> None:
-        for name in ('exposure_s', 'field_period_s'):
+        for name in ('exposure_s', 'field_period_s', 'reference_s', 'max_gain'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
                     math.isfinite(value) and value >= 0.0):
                 raise ConfigError(f'sim exposure: {name} must be a number >= 0, got {value!r}')
+        if self.reference_s <= 0.0 or self.max_gain < 1.0:
+            raise ConfigError(f'sim exposure: reference_s must be > 0 and max_gain >= 1, got '
+                              f'{self.reference_s!r} and {self.max_gain!r}')
+
+    def sensor_gain(self) -> float:
+        """Return the gain the automatic exposure applies (1 at ``reference_s`` or longer)."""
+        if self.exposure_s <= 0.0:
+            return 1.0
+        return min(max(self.reference_s / self.exposure_s, 1.0), self.max_gain)
+
+    def image_options(self, options: RenderOptions) -> RenderOptions:
+        """
+        Return ``options`` (the look at ``reference_s``) as this shutter makes it.
+
+        The gain multiplies the noise as well as the signal: the sim's noise
+        is the camera's read and amplifier noise, which the gain amplifies
+        whole (no shot noise is drawn, so this is the noise's worst case).
+        Longer shutters than the reference keep the reference's look (the
+        iris closes). An exposure of 0 (an idealised instant) keeps it too.
+        """
+        if self.exposure_s <= 0.0 or self.exposure_s >= self.reference_s:
+            return options
+        gain = self.sensor_gain()
+        light = min(1.0, self.exposure_s * gain / self.reference_s)
+        return replace(options, gain=options.gain * light, noise_sigma=options.noise_sigma * gain)
 
     def latest_stamp(self, now: float) -> float:
         """Return the latest stamp whose exposure has ended by ``now`` (a live node's frame)."""
@@ -320,7 +356,8 @@ class FloorSim:
             middle = (start + end) / 2.0
             fields.append(Field(*(self.scene.true_camera_pose(self._base_pose(x, t), *head_at(x))
                                   for x in (start, middle, end))))
-        return self.scene.render(camera, fields, seed, self.exposure.blur)
+        return self.scene.render(camera, fields, seed, self.exposure.blur,
+                                 self.exposure.image_options(self.scene.options))
 
     def truth(self, t: float, head_at: HeadAt, camera: CameraModel,
               blurs: Optional[dict] = None) -> FrameTruth:

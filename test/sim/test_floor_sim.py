@@ -197,3 +197,33 @@ def test_head_track_interpolates_and_holds():
     assert abs(abs(pan) - math.pi) < 1e-9 and tilt == pytest.approx(0.05)
     assert track(0.15)[1] == pytest.approx(0.15)
     assert track(9.0)[1] == pytest.approx(0.2)      # extrapolates 0.1 s, then holds
+
+
+def test_a_shorter_shutter_trades_blur_for_noise(floor_world):
+    # The camera's auto exposure makes up a shorter shutter's light with gain
+    # (Exposure.image_options): the cards smear less, the noise grows with the
+    # gain; past the top gain the image darkens.
+    camera = TABLE.camera_at(300)
+    base = yaw_pose(7.0, 10.0, math.pi, floor_world.z)
+    frames = {}
+    for shutter in (0.02, 0.004, 0.001):
+        sim = FloorSim(floor_world, floor_world.route('short'), exposure=Exposure(shutter))
+        pan, tilt = sim.scene.card_angles(base, 0.0, 0.0, CARD)
+        sim._base_pose = lambda t, stamp: base
+        shots = [sim.render(0.0, lambda t: (pan + 0.5 * t, tilt), camera, seed)  # 0.5 rad/s
+                 for seed in (1, 2)]
+        # The wall in the top rows (no card there): two seeds' noise differs.
+        wall = [image[:40].astype(float) for image, _ in shots]
+        frames[shutter] = (np.std(wall[0] - wall[1]) / math.sqrt(2.0), wall[0].mean(),
+                           shots[0][1][CARD])
+    noise, level, blur = frames[0.02]
+    assert blur == pytest.approx(camera.fx * 0.5 * 0.02, rel=0.03)
+    assert frames[0.004][2] == pytest.approx(blur / 5.0, rel=0.03)
+    assert frames[0.004][0] == pytest.approx(5.0 * noise, rel=0.15)
+    assert frames[0.004][1] == pytest.approx(level, abs=1.0)
+    # 1 ms needs a gain of 20: the camera stops at 7.94 and the wall darkens.
+    assert frames[0.001][0] == pytest.approx(7.94 * noise, rel=0.15)
+    assert frames[0.001][1] < level - 30.0
+    assert Exposure(0.04).image_options(sim.scene.options) == sim.scene.options
+    with pytest.raises(ConfigError):
+        Exposure(0.004, max_gain=0.5)

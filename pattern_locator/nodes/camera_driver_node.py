@@ -37,6 +37,13 @@ Publishes
 
 Services (std_srvs/Trigger): ``~/home``, ``~/reset``.
 
+Shutter (issue 12): ``shutter_s`` > 0 puts the camera in shutter priority at
+the nearest of its speeds (``visca.exposure``; the table by
+``video_standard``) in every start-up, so again after a reconnect or a
+power cycle; the camera's answers are logged once per setting (``shutter
+1/250 s (shutter priority)``) and shown in the diagnostics. A camera that
+refuses it gets one warning and keeps tracking at its own exposure.
+
 Parameters: :data:`PARAMETERS`; the tracking settings, the rate and the
 zoom inquiry period apply at run time (validated: a refused change says
 why), the port and the names are read-only.
@@ -66,7 +73,8 @@ from ..errors import ConfigError, PatternLocatorError
 from ..tracking.controller import TrackingController, TrackingParams
 from ..tracking.head_loop import HeadLoop, HeadReading
 from ..visca.camera import EviD31
-from ..visca.protocol import ViscaError
+from ..visca.exposure import ShutterRequest
+from ..visca.protocol import VIDEO_STANDARDS, ViscaError
 from ..visca.zoom_table import ZoomTable
 
 THROTTLE_S = 5.0
@@ -120,6 +128,11 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('zoom_control', False, 'zoom to keep the card at target_size_px', dynamic=True),
     Param('target_size_px', 120.0, "the card's outer ring semi-axis to zoom to", 10.0, 1000.0,
           dynamic=True),
+    Param('shutter_s', 0.0, 'exposure time to set (s): shutter priority at the nearest of '
+          "the camera's speeds in log scale (1/10000 .. 1/50 s); 0: leave the camera's auto "
+          'exposure alone', 0.0, 0.04),
+    Param('video_standard', 'pal', "the camera's video standard, for its shutter speeds: pal "
+          '(EVI-D31) or ntsc (EVI-D30)', choices=VIDEO_STANDARDS),
     Param('zoom_table', '', 'zoom -> intrinsics YAML; set to publish camera/camera_info '
           '(empty: do not publish)'),
     Param('zoom_every', 5, 'cycles between zoom inquiries', 1, 100, dynamic=True),
@@ -161,6 +174,14 @@ def tracking_params(p: Dict[str, Any]) -> TrackingParams:
         mount_pitch_rad=math.radians(p['head_mount_pitch_deg']))
 
 
+def shutter_request(p: Dict[str, Any]) -> Optional[ShutterRequest]:
+    """Return the shutter the node's parameters ask for (None: none); ConfigError if bad."""
+    try:
+        return ShutterRequest.from_seconds(float(p['shutter_s']), str(p['video_standard']))
+    except ViscaError as exc:
+        raise ConfigError(f'shutter_s: {exc}; 0 leaves the auto exposure') from None
+
+
 def _is_device_path(port: str) -> bool:
     """Return whether ``port`` names a file (not a pyserial URL such as loop://)."""
     return '://' not in port
@@ -180,7 +201,9 @@ class CameraDriverNode(Node):
         self.card_radius_m = float(load_pattern_config(p['pattern_config'] or None)
                                    .ring_radii[0])
         controller = TrackingController(tracking_params(p)) if p['tracking'] else None
-        self.camera = EviD31(p['port'], baud=p['baud'], address=p['address'])
+        self.camera = EviD31(p['port'], baud=p['baud'], address=p['address'],
+                             shutter_s=p['shutter_s'], video_standard=p['video_standard'])
+        self._exposure_logged = 0
         self.loop = HeadLoop(self.camera, controller, clock=self._now_s,
                              zoom_every=p['zoom_every'], expected_rate_hz=p['rate_hz'],
                              locator_present=self._locator_present)
@@ -224,6 +247,7 @@ class CameraDriverNode(Node):
     def _validate(values: Dict[str, Any]) -> Optional[str]:
         try:
             tracking_params(values)
+            shutter_request(values)
         except ConfigError as exc:
             return str(exc)
         return None
@@ -371,6 +395,7 @@ class CameraDriverNode(Node):
         was_ready = True
         while not self._stopping.is_set() and self.context.ok():
             self._apply_pending()
+            self._log_exposure()
             due += 1.0 / self.params['rate_hz']
             ready = self.camera.ready
             if ready and not was_ready:
@@ -395,6 +420,25 @@ class CameraDriverNode(Node):
             # Never run late cycles back to back: the line is the bottleneck.
             due = max(due, time.monotonic())
             self._stopping.wait(max(0.0, due - time.monotonic()))
+
+    def _log_exposure(self) -> None:
+        """Log each new outcome of the shutter setting once (start-up, power cycle)."""
+        count, report = self.camera.exposure_count, self.camera.exposure
+        if count == self._exposure_logged or report is None:
+            return
+        self._exposure_logged = count
+        if report.applied:
+            self.get_logger().info(report.message)
+        else:
+            self.get_logger().warning(report.message)
+
+    def _exposure_text(self) -> str:
+        request, report = self.camera.shutter_request, self.camera.exposure
+        if request is None:
+            return "the camera's own (shutter_s 0)"
+        if report is None:
+            return f'{request.describe()} asked, not set yet'
+        return report.message
 
     def _publish(self, reading: HeadReading) -> None:
         p = self.params
@@ -463,6 +507,7 @@ class CameraDriverNode(Node):
             'joint states published': self.readings, 'targets received': self.targets,
             'odometry received': self.odometry,
             'tracking mode': loop['mode'] if self.loop.controller is not None else 'off',
+            'exposure': self._exposure_text()[:200],
             'tracking commands': loop['commands sent'],
             'last error': (transport.last_error or loop['last error'])[:200],
         }

@@ -28,6 +28,7 @@ from typing import Callable, Dict, Optional, Tuple, TypeVar
 import serial
 
 from . import protocol as visca
+from .exposure import ExposureReport, ShutterRequest
 from .startup import StartUp
 from .transport import (CommandResult, ViscaCommandError, ViscaConnectionError,
                         ViscaSocketsBusy, ViscaTimeout, ViscaTransport)
@@ -109,9 +110,14 @@ class EviD31:
 
     Positive pan turns the head **left** (counter-clockwise seen from above);
     the camera's own VISCA pan is positive right and is negated here.
-    Positive tilt looks up (as in VISCA). Call :meth:`start` before anything
-    else. Errors are :class:`~pattern_locator.visca.protocol.ViscaError` subclasses
-    from :mod:`pattern_locator.visca.transport`; while the port is gone every
+    Positive tilt looks up (as in VISCA). ``shutter_s`` > 0: the start-up
+    (after every reconnect and Network Change too) sets shutter priority at
+    the table's speed nearest to it (:mod:`~pattern_locator.visca.exposure`;
+    ``video_standard`` 'pal' for the D31, 'ntsc' for the D30) and
+    :attr:`exposure` says how that went; 0 leaves the camera's exposure
+    alone. Call :meth:`start` before anything else. Errors are
+    :class:`~pattern_locator.visca.protocol.ViscaError` subclasses from
+    :mod:`pattern_locator.visca.transport`; while the port is gone every
     call raises ``ViscaConnectionError`` at once, and after it comes back the
     start-up runs again in the background (``ready`` tells when it is done;
     commands sent while its Address Set / IF_Clear run raise
@@ -122,10 +128,15 @@ class EviD31:
                  reply_timeout_s: float = 0.3, completion_timeout_s: float = 30.0,
                  serial_factory: Callable[..., serial.Serial] = serial.Serial,
                  power_on_at_start: bool = True, restart_timeout_s: float = 15.0,
+                 shutter_s: float = 0.0, video_standard: str = 'pal',
                  **transport_options) -> None:
         self.port = port
         self.address = address
         self.restart_timeout_s = restart_timeout_s
+        # Checked before anything opens: ViscaError for a shutter the camera cannot do.
+        self.shutter_request = ShutterRequest.from_seconds(shutter_s, video_standard)
+        self._exposure: Optional[ExposureReport] = None
+        self._exposure_count = 0
         self._startup = StartUp(self, power_on_at_start)
         self._transport = ViscaTransport(
             port, baud=baud, address=address, reply_timeout_s=reply_timeout_s,
@@ -178,6 +189,21 @@ class EviD31:
     def last_rejected(self) -> str:
         """Return why the last answer was rejected ('' if none was)."""
         return self._last_rejected
+
+    @property
+    def exposure(self) -> Optional[ExposureReport]:
+        """Return how the last shutter setting went (None: none asked for, or not yet)."""
+        return self._exposure
+
+    @property
+    def exposure_count(self) -> int:
+        """Return how many times the shutter setting was applied (or tried) so far."""
+        return self._exposure_count
+
+    def note_exposure(self, report: ExposureReport) -> None:
+        """Keep the outcome of a shutter setting (the start-up calls it)."""
+        self._exposure = report
+        self._exposure_count += 1
 
     @property
     def pan_limits_rad(self) -> Tuple[float, float]:
@@ -344,6 +370,17 @@ class EviD31:
         with self.command_lock:
             self._send(visca.focus_auto(self.address), self._short_timeout(), wait=True)
 
+    def set_ae_mode(self, mode: int) -> None:
+        """Set the exposure mode (``protocol.AE_SHUTTER_PRIORITY``, ...); waits for completion."""
+        with self.command_lock:
+            self._send(visca.ae_mode(self.address, mode), self._short_timeout(), wait=True)
+
+    def set_shutter_position(self, position: int) -> None:
+        """Set the shutter position (00..1Bh, ``protocol.shutter_seconds``); waits likewise."""
+        with self.command_lock:
+            self._send(visca.shutter_direct(self.address, position), self._short_timeout(),
+                       wait=True)
+
     def power(self, on: bool, wait: bool = True) -> CommandResult:
         """Switch the camera on or to standby."""
         with self.command_lock:
@@ -372,6 +409,16 @@ class EviD31:
     def power_on(self) -> bool:
         """Return True when the camera is on, False in standby."""
         return self._inquiry('power', visca.inquiry_power(self.address), 1, visca.parse_power)
+
+    def ae_mode(self) -> int:
+        """Return the exposure mode (``protocol.AE_MODE_NAMES``); an unknown one is rejected."""
+        return self._inquiry('exposure mode', visca.inquiry_ae_mode(self.address), 1,
+                             visca.parse_ae_mode)
+
+    def shutter_position(self) -> int:
+        """Return the shutter position (00..1Bh); one beyond the table is rejected."""
+        return self._inquiry('shutter', visca.inquiry_shutter(self.address), 4,
+                             visca.parse_shutter_position)
 
     def version(self) -> ViscaVersion:
         """Return the camera's vendor, model, ROM version and socket count."""

@@ -101,13 +101,36 @@ Inquiries (socket 0, no ACK; answered in standby and during initialisation)
     down/up/right/left end of travel. E.g. ``20 00`` idle, ``28 00`` after
     a move, ``14 00`` initialising, ``28 06`` at the up-right end.
 
+Exposure (not in visca.md: Sony's EVI-D100 technical manual, "Command List,
+D30/31 mode", the shutter table on p. 43, and the standard VISCA camera
+commands of Sony's EVI/FCB manuals)
+    CAM_AE ``8x 01 04 39 pp FF`` sets the exposure mode (pp 00 full auto, 03
+    manual, 0A shutter priority, 0B iris priority, 0D bright; other values a
+    syntax error), CAM_Shutter direct ``8x 01 04 4A 00 00 0p 0q FF`` the
+    shutter position 00..1Bh (above 1Bh, or a nibble byte above 0F: syntax
+    error), ``8x 01 04 0A 00/02/03 FF`` resets it to 00 or steps it up
+    (faster) / down, stopping at the ends (?). All are instant commands (ACK,
+    completion in the next field) and refused like the others in standby and
+    during initialisation. Inquiries ``8x 09 04 39 FF`` -> ``z0 50 pp FF``
+    and ``8x 09 04 4A FF`` -> ``z0 50 00 00 0p 0q FF`` answer what was
+    commanded. :attr:`HeadState.shutter_s` is the exposure time the camera
+    applies: in shutter priority and manual the position's speed from the
+    PAL table (``protocol.SHUTTER_DENOMINATORS``: 00 1/50 s .. 1Bh 1/10000
+    s), in the other modes ``auto_shutter_s`` (the camera picks it; 1/50 s
+    by default); the position is kept while the camera picks. A change
+    reaches :meth:`state` at the next field, when its completion goes out.
+    A power-up (:meth:`start`, :meth:`power_cycle`) returns to full auto,
+    position 00; standby and pan-tilt Reset keep the exposure (?).
+
 Faults (for tests, thread-safe)
     ``faults.drop_probability`` / ``garble_probability`` (flip one bit or
     insert 1-3 random bytes) / ``delay_s`` apply to each reply;
     ``faults.bad_position_probability`` (impossible position answers),
     ``lose_completions``, ``bad_ack_socket_probability`` (ACKs on sockets
     0, 3..9), ``error_only`` (every addressed packet answered with one
-    error code, nothing done), ``phantom_ack_interval_s`` (ACKs never
+    error code, nothing done), ``refuse_exposure`` (the exposure commands
+    and inquiries answered with one error code: a model without them),
+    ``phantom_ack_interval_s`` (ACKs never
     completed) and ``deaf_to_commands`` are the broken camera of issue 10
     (see :class:`Faults`);
     :meth:`reply_to_wrong_socket_once` swaps sockets 1 and 2 in the next
@@ -122,6 +145,7 @@ Faults (for tests, thread-safe)
 
 import collections
 from dataclasses import dataclass
+import math
 import os
 import select
 import signal
@@ -173,9 +197,11 @@ class EmulatedEviD31:
     def __init__(self, field_rate_hz: float = 50.0, init_s: float = 2.0, reset_s: float = 2.5,
                  pace_output: bool = True, link_path: Optional[str] = None, seed: int = 0,
                  require_address_set: bool = True, zoom_full_s: float = 2.2,
-                 baud: int = DEFAULT_BAUD) -> None:
+                 baud: int = DEFAULT_BAUD, auto_shutter_s: float = 0.02) -> None:
         if field_rate_hz <= 0.0:
             raise ValueError(f'field rate {field_rate_hz} Hz is not positive')
+        if not (math.isfinite(auto_shutter_s) and 0.0 < auto_shutter_s <= 1.0):
+            raise ValueError(f'auto exposure time {auto_shutter_s} s is not in (0, 1]')
         self.field_rate_hz = float(field_rate_hz)
         self.link_path = os.fspath(link_path) if link_path is not None else None
         # 8N1: ten bit times per byte.
@@ -183,7 +209,8 @@ class EmulatedEviD31:
         self.faults = Faults()
         self._injector = FaultInjector(self.faults, seed)
         self._device = EmulatedDevice(max(0.0, float(init_s)), max(0.0, float(reset_s)),
-                                      float(zoom_full_s), bool(require_address_set))
+                                      float(zoom_full_s), bool(require_address_set),
+                                      float(auto_shutter_s))
         self._responder = ViscaResponder(self._device)
         self._lock = threading.RLock()
         self._thread: Optional[threading.Thread] = None

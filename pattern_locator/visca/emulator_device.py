@@ -13,8 +13,10 @@ from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 from .emulator_motion import HeadMotion
-from .protocol import (pan_speed_deg_s, PAN_SPEED_MAX, PAN_UNITS_PER_DEG, tilt_speed_deg_s,
-                       TILT_SPEED_MAX, TILT_UNITS_PER_DEG, ZOOM_TELE)
+from .protocol import (AE_FIXED_SHUTTER_MODES, AE_FULL_AUTO, pan_speed_deg_s, PAN_SPEED_MAX,
+                       PAN_UNITS_PER_DEG, SHUTTER_DOWN, SHUTTER_POSITION_MAX, SHUTTER_RESET,
+                       shutter_seconds, tilt_speed_deg_s, TILT_SPEED_MAX, TILT_UNITS_PER_DEG,
+                       ZOOM_TELE)
 
 SOCKETS = (1, 2)
 
@@ -32,6 +34,9 @@ class HeadState:
     camera counts them; a ROS joint state negates pan). ``zoom_units`` is
     0 (wide) .. 1023 (tele), not rounded. ``sockets_busy`` lists the sockets
     holding a command; ``stamp`` is the ``time.monotonic()`` of the state.
+    ``shutter_s`` is the exposure time the camera applies now: the shutter
+    position's speed (PAL table) in shutter priority or manual, else the
+    emulator's ``auto_shutter_s``.
     """
 
     pan_deg: float
@@ -41,6 +46,7 @@ class HeadState:
     initialising: bool
     sockets_busy: Tuple[int, ...]
     stamp: float
+    shutter_s: float
 
     @property
     def pan_units(self) -> float:
@@ -89,10 +95,11 @@ class EmulatedDevice:
     """
 
     def __init__(self, init_s: float, reset_s: float, zoom_full_s: float,
-                 require_address_set: bool) -> None:
+                 require_address_set: bool, auto_shutter_s: float = 0.02) -> None:
         self.init_s = init_s
         self.reset_s = reset_s
         self.zoom_full_s = zoom_full_s
+        self.auto_shutter_s = auto_shutter_s
         self.require_address_set = require_address_set
         self.head = HeadMotion()
         self.tick = 0
@@ -102,6 +109,12 @@ class EmulatedDevice:
         self.focus_auto = True
         self.pt_commanded = False
         self.sockets: Dict[int, Optional[Held]] = dict.fromkeys(SOCKETS)
+        # Exposure as commanded (what the inquiries answer) and as applied to the
+        # fields: a change reaches the image at the next field.
+        self.ae_mode = AE_FULL_AUTO
+        self.shutter_position = 0
+        self._exposure_applied = (AE_FULL_AUTO, 0)
+        self._exposure_from_tick: Optional[int] = None
 
     # State ----------------------------------------------------------------------------------
 
@@ -129,7 +142,15 @@ class EmulatedDevice:
         return HeadState(pan_deg=pan / PAN_UNITS_PER_DEG, tilt_deg=tilt / TILT_UNITS_PER_DEG,
                          zoom_units=self.head.zoom_at(now), powered=self.powered,
                          initialising=self.initialising(now),
-                         sockets_busy=self.busy_sockets(), stamp=now)
+                         sockets_busy=self.busy_sockets(), stamp=now,
+                         shutter_s=self.shutter_s())
+
+    def shutter_s(self) -> float:
+        """Return the exposure time applied to the current field (s)."""
+        mode, position = self._exposure_applied
+        if mode in AE_FIXED_SHUTTER_MODES:
+            return shutter_seconds(position, 'pal')
+        return self.auto_shutter_s
 
     def pan_tilt_status(self, now: float) -> int:
         """Return the pan-tilt mode answer's 16 status bits."""
@@ -151,12 +172,19 @@ class EmulatedDevice:
         self.powered = True
         self.focus_auto = True
         self.pt_commanded = False
+        # A real camera comes up in full auto exposure.
+        self.ae_mode, self.shutter_position = AE_FULL_AUTO, 0
+        self._exposure_applied = (AE_FULL_AUTO, 0)
+        self._exposure_from_tick = None
         self.head.clear_limits()
         self._initialise(now, self.init_s, zoom=True)
 
     def next_field(self, now: float) -> List[int]:
         """Start a video field; free and return the sockets whose command finished."""
         self.tick += 1
+        if self._exposure_from_tick is not None and self.tick >= self._exposure_from_tick:
+            self._exposure_applied = (self.ae_mode, self.shutter_position)
+            self._exposure_from_tick = None
         finished = []
         for socket in SOCKETS:
             held = self.sockets[socket]
@@ -259,6 +287,22 @@ class EmulatedDevice:
             head.set_limit(now, *args)
         elif name == 'limit_clear':
             head.clear_limit(now, args[0])
+        elif name in ('ae_mode', 'shutter', 'shutter_step'):
+            self._exposure(name, args[0])
+
+    def _exposure(self, name: str, value: int) -> None:
+        if name == 'ae_mode':
+            self.ae_mode = value
+        elif name == 'shutter':
+            self.shutter_position = value
+        elif value == SHUTTER_RESET:
+            self.shutter_position = 0
+        else:
+            # Up = a faster shutter; both stop at the table's ends.
+            step = -1 if value == SHUTTER_DOWN else 1
+            self.shutter_position = min(SHUTTER_POSITION_MAX, max(0, self.shutter_position + step))
+        # The field being exposed keeps its exposure; the next one gets the new one.
+        self._exposure_from_tick = self.tick + 1
 
     def _power(self, on: bool, socket: int, now: float) -> None:
         if on and not self.powered:

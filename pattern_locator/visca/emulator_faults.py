@@ -23,6 +23,9 @@ BAD_POSITIONS = (
     encode_nibbles(-2000) + encode_nibbles(-1000),
     bytes((0x00, 0x13, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00)),
 )
+# The third byte of the exposure commands and inquiries: CAM_AE, CAM_Shutter direct and
+# reset/up/down.
+EXPOSURE_OPS = (0x39, 0x4A, 0x0A)
 # Sockets the EVI-D31 does not have.
 ABSENT_SOCKETS = (0, 3, 4, 5, 6, 7, 8, 9)
 
@@ -45,7 +48,10 @@ class Faults:
     * ``phantom_ack_interval_s``: every so often, ACKs on sockets 1 and 2
       that no command caused and no completion follows;
     * ``deaf_to_commands``: commands get no reply and do nothing
-      (inquiries and broadcasts are still answered).
+      (inquiries and broadcasts are still answered);
+    * ``refuse_exposure``: an error code: the exposure commands and
+      inquiries (CAM_AE, CAM_Shutter) are answered with that error only and
+      do nothing (a model or firmware without them).
 
     Assigning an attribute is atomic, so tests may change them while the
     emulator runs.
@@ -58,8 +64,9 @@ class Faults:
         """
         Set knobs from ``name=value,...`` (e.g. ``bad_position_probability=0.3,error_only=2``).
 
-        Error codes are hex; ``lose_completions`` and ``deaf_to_commands`` take
-        0/1. ConfigError, in one line, for an unknown name or a bad value.
+        Error codes (``error_only``, ``refuse_exposure``) are hex;
+        ``lose_completions`` and ``deaf_to_commands`` take 0/1. ConfigError, in
+        one line, for an unknown name or a bad value.
         """
         for item in filter(None, (part.strip() for part in spec.split(','))):
             name, _, text = item.partition('=')
@@ -68,7 +75,7 @@ class Faults:
                 known = ', '.join(sorted(k for k in vars(self) if not k.startswith('_')))
                 raise ConfigError(f'unknown fault {name!r} (known: {known})')
             try:
-                if name == 'error_only':
+                if name in ('error_only', 'refuse_exposure'):
                     value = int(text, 16)
                 elif name in ('lose_completions', 'deaf_to_commands'):
                     value = bool(int(text))
@@ -92,6 +99,7 @@ class Faults:
         self.error_only: Optional[int] = None
         self.phantom_ack_interval_s = 0.0
         self.deaf_to_commands = False
+        self.refuse_exposure: Optional[int] = None
 
 
 class FaultInjector:
@@ -119,6 +127,12 @@ class FaultInjector:
         if self.faults.deaf_to_commands and packet[1] != 0x09:
             self.counts['ignored'] += 1
             return ()
+        code = self.faults.refuse_exposure
+        if code is not None and len(packet) >= 4 and packet[1] in (0x01, 0x09) \
+                and packet[2] == 0x04 and packet[3] in EXPOSURE_OPS:
+            self.counts['refused_exposure'] += 1
+            socket = 1 if code == ERROR_NOT_EXECUTABLE and packet[1] == 0x01 else 0
+            return (error(address, socket, code),)
         return None
 
     def reply(self, packet: bytes) -> Optional[Tuple[bytes, float]]:

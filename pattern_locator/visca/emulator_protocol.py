@@ -12,12 +12,14 @@ import collections
 from typing import List, Optional
 
 from .emulator_device import Command, EmulatedDevice, SOCKETS
-from .protocol import (ack, address_set_reply, answer, BROADCAST, completion, decode_nibbles,
-                       error, ERROR_BUFFER_FULL, ERROR_CANCELLED, ERROR_MESSAGE_LENGTH,
-                       ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE, ERROR_SYNTAX, PAN_LIMIT_UNITS,
-                       PAN_SPEED_MAX, pan_tilt_position_payload, POWER_ON, POWER_STANDBY,
-                       TERMINATOR, TILT_LIMIT_UNITS, TILT_SPEED_MAX, zoom_position_payload,
-                       ZOOM_SPEED_MAX, ZOOM_SPEED_MIN, ZOOM_TELE, ZOOM_WIDE)
+from .protocol import (ack, address_set_reply, AE_MODE_NAMES, answer, BROADCAST, completion,
+                       decode_nibbles, error, ERROR_BUFFER_FULL, ERROR_CANCELLED,
+                       ERROR_MESSAGE_LENGTH, ERROR_NO_SOCKET, ERROR_NOT_EXECUTABLE,
+                       ERROR_SYNTAX, PAN_LIMIT_UNITS, PAN_SPEED_MAX, pan_tilt_position_payload,
+                       POWER_ON, POWER_STANDBY, SHUTTER_DOWN, SHUTTER_POSITION_MAX,
+                       shutter_position_payload, SHUTTER_RESET, SHUTTER_UP, TERMINATOR,
+                       TILT_LIMIT_UNITS, TILT_SPEED_MAX, zoom_position_payload, ZOOM_SPEED_MAX,
+                       ZOOM_SPEED_MIN, ZOOM_TELE, ZOOM_WIDE)
 
 VENDOR_ID = 0x0001
 MODEL_ID = 0x0402
@@ -93,6 +95,15 @@ def _camera_command(body: bytes) -> Command:
         return Command('focus_drive', 'instant', None, (body[3],))
     if op == 0x00 and n == 4 and body[3] in (POWER_ON, POWER_STANDBY):
         return Command('power', 'instant', None, (body[3] == POWER_ON,))
+    if op == 0x39 and n == 4 and body[3] in AE_MODE_NAMES:
+        return Command('ae_mode', 'instant', None, (body[3],))
+    if op == 0x4A and n == 7:
+        position = _nibbles(body[3:7], signed=False)
+        if position > SHUTTER_POSITION_MAX:
+            raise CommandSyntaxError()
+        return Command('shutter', 'instant', None, (position,))
+    if op == 0x0A and n == 4 and body[3] in (SHUTTER_RESET, SHUTTER_UP, SHUTTER_DOWN):
+        return Command('shutter_step', 'instant', None, (body[3],))
     raise CommandSyntaxError()
 
 
@@ -194,6 +205,10 @@ class ViscaResponder:
             payload = bytes((status >> 8, status & 0xFF))
         elif body == b'\x09\x04\x38':
             payload = bytes((0x02 if device.focus_auto else 0x03,))
+        elif body == b'\x09\x04\x39':
+            payload = bytes((device.ae_mode,))
+        elif body == b'\x09\x04\x4A':
+            payload = shutter_position_payload(device.shutter_position)
         elif body == b'\x09\x00\x02':
             payload = bytes((VENDOR_ID >> 8, VENDOR_ID & 0xFF, MODEL_ID >> 8, MODEL_ID & 0xFF,
                              ROM_VERSION >> 8, ROM_VERSION & 0xFF, len(SOCKETS)))

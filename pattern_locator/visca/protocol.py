@@ -84,6 +84,37 @@ ERROR_NAMES = {
 
 POWER_ON, POWER_STANDBY = 0x02, 0x03
 
+# Exposure (CAM_AE, CAM_Shutter): not in visca.md. From Sony's EVI-D100 technical manual,
+# "Command List, D30/31 mode" (the shutter-speed table, p. 43; e.g.
+# https://www.manualsdir.com/manuals/144564/sony-evi-d100.html?page=43) and the standard
+# VISCA camera commands of Sony's EVI/FCB manuals.
+AE_FULL_AUTO, AE_MANUAL, AE_SHUTTER_PRIORITY, AE_IRIS_PRIORITY, AE_BRIGHT = (
+    0x00, 0x03, 0x0A, 0x0B, 0x0D)
+AE_MODE_NAMES = {
+    AE_FULL_AUTO: 'full auto',
+    AE_MANUAL: 'manual',
+    AE_SHUTTER_PRIORITY: 'shutter priority',
+    AE_IRIS_PRIORITY: 'iris priority',
+    AE_BRIGHT: 'bright',
+}
+# The modes in which the camera uses the commanded shutter position; in the others it
+# picks the shutter itself.
+AE_FIXED_SHUTTER_MODES = (AE_MANUAL, AE_SHUTTER_PRIORITY)
+# Shutter position (CAM_Shutter direct, 00..1Bh) -> 1/speed in seconds, EVI-D31 (PAL).
+# The EVI-D30 (NTSC) has the same table except that 00 is 1/60 as well. The one copy of
+# the table: the emulated camera and the driver both read it through shutter_seconds().
+SHUTTER_DENOMINATORS = {
+    'pal': (50, 60, 75, 90, 100, 120, 150, 180, 215, 250, 300, 350, 425, 500, 600, 725,
+            850, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 6000, 10000),
+}
+SHUTTER_DENOMINATORS['ntsc'] = (60,) + SHUTTER_DENOMINATORS['pal'][1:]
+VIDEO_STANDARDS = ('pal', 'ntsc')
+SHUTTER_POSITION_MAX = len(SHUTTER_DENOMINATORS['pal']) - 1
+# CAM_Shutter reset / up / down (8x 01 04 0A pp FF).
+SHUTTER_RESET, SHUTTER_UP, SHUTTER_DOWN = 0x00, 0x02, 0x03
+# A requested exposure further than this factor outside the table is refused, not rounded.
+SHUTTER_REQUEST_FACTOR = 2.0
+
 
 def hex_bytes(data: bytes) -> str:
     """Return bytes the way visca.md writes them: ``81 01 06 04 FF``."""
@@ -150,6 +181,51 @@ def pan_speed_deg_s(step: int) -> float:
 def tilt_speed_deg_s(step: int) -> float:
     """Return the tilt speed of a speed step (1..14h); linear up to 50 deg/s."""
     return TILT_MAX_DEG_S * step / TILT_SPEED_MAX
+
+
+def _standard(video_standard: str) -> Tuple[int, ...]:
+    try:
+        return SHUTTER_DENOMINATORS[video_standard]
+    except KeyError:
+        raise ViscaError(f'video standard {video_standard!r} is not one of '
+                         f'{", ".join(VIDEO_STANDARDS)}') from None
+
+
+def shutter_denominator(position: int, video_standard: str = 'pal') -> int:
+    """Return the shutter speed's denominator N (1/N s) of a shutter position 00..1Bh."""
+    table = _standard(video_standard)
+    if not 0 <= position <= SHUTTER_POSITION_MAX:
+        raise ViscaError(f'shutter position {position} is not in 0..{SHUTTER_POSITION_MAX:X}h')
+    return table[position]
+
+
+def shutter_seconds(position: int, video_standard: str = 'pal') -> float:
+    """Return the exposure time (s) of a shutter position 00..1Bh (the EVI-D30/D31 table)."""
+    return 1.0 / shutter_denominator(position, video_standard)
+
+
+def nearest_shutter_position(seconds: float, video_standard: str = 'pal') -> int:
+    """
+    Return the shutter position whose speed is nearest to ``seconds`` in log scale.
+
+    ViscaError for a time that is not finite and positive, or more than
+    :data:`SHUTTER_REQUEST_FACTOR` beyond the table's ends (1/10000 s ..
+    1/50 s PAL, 1/60 s NTSC): rounding it would not give what was asked.
+    Of two positions with the same speed (NTSC 00 and 01) the lower one.
+    """
+    table = _standard(video_standard)
+    fastest, slowest = 1.0 / table[-1], 1.0 / table[0]
+    if not (math.isfinite(seconds) and fastest / SHUTTER_REQUEST_FACTOR <= seconds
+            <= slowest * SHUTTER_REQUEST_FACTOR):
+        raise ViscaError(f'shutter time {seconds} s is outside what the camera can do '
+                         f'(1/{table[-1]} .. 1/{table[0]} s, {video_standard.upper()})')
+    target = math.log(seconds)
+    return min(range(len(table)), key=lambda i: (abs(math.log(1.0 / table[i]) - target), i))
+
+
+def describe_shutter(position: int, video_standard: str = 'pal') -> str:
+    """Return a shutter position as a speed: ``1/250 s``."""
+    return f'1/{shutter_denominator(position, video_standard)} s'
 
 
 def _address(address: int) -> int:
@@ -297,6 +373,22 @@ def power(address: int, on: bool) -> bytes:
                   TERMINATOR))
 
 
+def ae_mode(address: int, mode: int) -> bytes:
+    """Return CAM_AE: the exposure mode (AE_FULL_AUTO, AE_SHUTTER_PRIORITY, ...)."""
+    if mode not in AE_MODE_NAMES:
+        raise ViscaError(f'exposure mode {mode:02X}h is not one of '
+                         f'{", ".join(f"{m:02X}" for m in AE_MODE_NAMES)}')
+    return bytes((_address(address), 0x01, 0x04, 0x39, mode, TERMINATOR))
+
+
+def shutter_direct(address: int, position: int) -> bytes:
+    """Return CAM_Shutter direct to ``position`` (00 1/50 s .. 1Bh 1/10000 s, PAL)."""
+    if not 0 <= position <= SHUTTER_POSITION_MAX:
+        raise ViscaError(f'shutter position {position} is not in 0..{SHUTTER_POSITION_MAX:X}h')
+    return (bytes((_address(address), 0x01, 0x04, 0x4A))
+            + encode_nibbles(position, signed=False) + bytes((TERMINATOR,)))
+
+
 # Inquiries (controller -> camera; answered on socket 0 without an ACK).
 def inquiry_pan_tilt_position(address: int) -> bytes:
     """Return the pan-tilt position inquiry."""
@@ -326,6 +418,16 @@ def inquiry_pan_tilt_mode(address: int) -> bytes:
 def inquiry_version(address: int) -> bytes:
     """Return the version inquiry."""
     return bytes((_address(address), 0x09, 0x00, 0x02, TERMINATOR))
+
+
+def inquiry_ae_mode(address: int) -> bytes:
+    """Return the exposure mode (CAM_AE) inquiry."""
+    return bytes((_address(address), 0x09, 0x04, 0x39, TERMINATOR))
+
+
+def inquiry_shutter(address: int) -> bytes:
+    """Return the shutter position (CAM_Shutter) inquiry."""
+    return bytes((_address(address), 0x09, 0x04, 0x4A, TERMINATOR))
 
 
 def is_inquiry(packet: bytes) -> bool:
@@ -380,6 +482,11 @@ def pan_tilt_position_payload(pan: int, tilt: int) -> bytes:
 
 def zoom_position_payload(position: int) -> bytes:
     """Return the payload of the zoom position answer."""
+    return encode_nibbles(position, signed=False)
+
+
+def shutter_position_payload(position: int) -> bytes:
+    """Return the payload of the shutter answer: ``00 00 0p 0q``."""
     return encode_nibbles(position, signed=False)
 
 
@@ -489,6 +596,26 @@ def parse_power(payload: bytes) -> bool:
     if len(payload) != 1 or payload[0] not in (POWER_ON, POWER_STANDBY):
         raise ViscaError(f'power answer is not 02 or 03: {hex_bytes(payload)}')
     return payload[0] == POWER_ON
+
+
+def parse_ae_mode(payload: bytes) -> int:
+    """Return the exposure mode from its answer's payload; ViscaReplyError if unknown."""
+    if len(payload) != 1 or payload[0] not in AE_MODE_NAMES:
+        raise ViscaReplyError(f'exposure mode answer is not one of '
+                              f'{", ".join(f"{m:02X}" for m in AE_MODE_NAMES)}: '
+                              f'{hex_bytes(payload)}')
+    return payload[0]
+
+
+def parse_shutter_position(payload: bytes) -> int:
+    """Return the shutter position (00..1Bh) from its answer's payload; ViscaReplyError."""
+    if len(payload) != 4:
+        raise ViscaReplyError(f'shutter answer needs 4 bytes, got {hex_bytes(payload)}')
+    position = _answer_nibbles(payload, False)
+    if position > SHUTTER_POSITION_MAX:
+        raise ViscaReplyError(f'shutter answer {hex_bytes(payload)} is {position:02X}h, '
+                              f'outside 00..{SHUTTER_POSITION_MAX:02X}h')
+    return position
 
 
 def parse_max_speed(payload: bytes) -> Tuple[int, int]:

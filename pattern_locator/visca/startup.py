@@ -1,12 +1,17 @@
 """
-The EVI-D31's start-up: Address Set, IF_Clear, power on, the end of the initialisation.
+The EVI-D31's start-up: Address Set, IF_Clear, power on, the end of the initialisation, shutter.
 
 ROS-free. :class:`StartUp` runs the sequence from
 :meth:`~pattern_locator.visca.camera.EviD31.start` (the caller's thread) and
-again after every reconnect and Network Change (the transport's callback
-thread), and says when the camera is ready on the current connection. A
-step that fails is retried every 50 ms until the deadline; closing the
-camera ends it at once.
+again after every reconnect (the transport's callback thread), and says
+when the camera is ready on the current connection. A step that fails is
+retried every 50 ms until the deadline; closing the camera ends it at once.
+After a Network Change (a power cycle, or another camera on the chain) it
+sends Address Set and sets the requested shutter again, once the camera's
+initialisation lets it: a power-up returns the camera to full auto exposure.
+The shutter never fails a start-up: a refusal or a camera that keeps
+quiet about it is reported (:attr:`~pattern_locator.visca.camera.EviD31.exposure`)
+and the camera is ready all the same.
 """
 
 import logging
@@ -16,6 +21,7 @@ from typing import Callable, Optional, TYPE_CHECKING
 
 from . import protocol as visca
 from .exceptions import ViscaCommandError, ViscaConnectionError, ViscaTimeout
+from .exposure import apply_shutter
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from .camera import EviD31
@@ -54,7 +60,7 @@ class StartUp:
     def run(self, deadline: float, timeout_s: float, wait_reconnect: bool,
             generation: Optional[int] = None) -> None:
         """
-        Run Address Set, IF_Clear, power on and the wait for the initialisation.
+        Run Address Set, IF_Clear, power on, the wait for the initialisation, the shutter.
 
         ``wait_reconnect``: a lost connection is waited out until ``deadline``
         (``start``) instead of ending the start-up (after a reconnect, where
@@ -88,6 +94,10 @@ class StartUp:
                     camera.forget_motions()
             for what, step in steps[2:]:
                 self._retry(deadline, step, what, timeout_s, wait_reconnect)
+            if camera.shutter_request is not None:
+                # After the initialisation the camera executes commands: a refusal now
+                # is final (not waited out).
+                self._set_shutter(deadline, False, None)
             self._ready.set()
             logger.info('EVI-D31 on %s ready', camera.port)
 
@@ -143,10 +153,32 @@ class StartUp:
         camera.position()
         return True
 
+    def _shutter_step(self, deadline: float, wait_initialising: bool,
+                      generation: Optional[int] = None) -> bool:
+        """
+        Set the shutter; True once it is done or given up (the report is kept).
+
+        Retried (False) while the camera answers not executable (only with
+        ``wait_initialising``: a power-up's initialisation) or an answer got
+        lost, until shortly before ``deadline``; also given up when the
+        connection changed under it (``generation``: its reconnect's start-up
+        sets the shutter again).
+        """
+        camera = self._camera
+        report = apply_shutter(camera, camera.shutter_request)
+        again = report.retryable or (wait_initialising and report.not_executable)
+        if again and time.monotonic() + RETRY_PAUSE_S < deadline \
+                and (generation is None or generation == camera.transport.reconnect_count):
+            return False
+        camera.note_exposure(report)
+        # Info either way: the owner (the node) turns a failed one into its warning, once.
+        logger.info('EVI-D31 on %s: %s', camera.port, report.message)
+        return True
+
     # Transport callbacks (on the transport's callback thread, never the reader) --------------
 
     def on_network_change(self) -> None:
-        """Send Address Set again: the camera may have been power-cycled."""
+        """Send Address Set again (the camera may have been power-cycled), then the shutter."""
         camera = self._camera
         try:
             camera.transport.broadcast(visca.address_set())
@@ -154,6 +186,35 @@ class StartUp:
         except visca.ViscaError as exc:
             logger.warning('EVI-D31 on %s: address set after network change failed: %s',
                            camera.port, exc)
+            return
+        if camera.shutter_request is not None:
+            self._reapply_shutter()
+
+    def _reapply_shutter(self) -> None:
+        """Set the shutter again after a Network Change, waiting out an initialisation."""
+        camera = self._camera
+        generation = camera.transport.reconnect_count
+        deadline = time.monotonic() + camera.restart_timeout_s
+        # Not while a start-up runs: it sets the shutter itself at its end.
+        if not self._lock.acquire(timeout=camera.restart_timeout_s):
+            return
+        try:
+            self._set_shutter(deadline, True, generation)
+        except visca.ViscaError as exc:
+            # The port went away (the reconnect's start-up sets the shutter) or closing.
+            if not camera.closing:
+                logger.warning('EVI-D31 on %s: shutter after network change failed: %s',
+                               camera.port, exc)
+        finally:
+            self._lock.release()
+
+    def _set_shutter(self, deadline: float, wait_initialising: bool,
+                     generation: Optional[int]) -> None:
+        """Run :meth:`_shutter_step` until it is done; ViscaConnectionError when closed."""
+        camera = self._camera
+        while not self._shutter_step(deadline, wait_initialising, generation):
+            if camera.wait_closing(RETRY_PAUSE_S):
+                raise ViscaConnectionError(f'EVI-D31 on {camera.port}: closed during start-up')
 
     def on_reconnect(self) -> None:
         """Run the start-up on the new connection."""

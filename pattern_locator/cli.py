@@ -294,6 +294,9 @@ def _parser() -> argparse.ArgumentParser:
                       help="floor routes: the driver ignores the base's odometry")
     demo.add_argument('--interlace', action='store_true',
                       help='floor routes: interlaced frames (two fields)')
+    demo.add_argument('--shutter', type=_number_in(0.0, 0.04, what='--shutter'),
+                      default=0.004, help="floor routes: the camera's shutter the driver "
+                      "sets, s (default 0.004 = 1/250; 0: the camera's auto exposure, 1/50)")
     demo.add_argument('--estimator', choices=ESTIMATORS, default='exact',
                       help="the locator's pose estimator (default exact)")
     demo.add_argument('--stops', type=int, default=30, help='paper-stops: route stops (1-30)')
@@ -563,7 +566,7 @@ def _demo(args: argparse.Namespace) -> int:
                               output_dir=args.output_dir, seed=args.seed,
                               estimator=args.estimator, zoom_control=not args.no_zoom,
                               feed_forward=not args.no_feed_forward,
-                              interlace=args.interlace)
+                              interlace=args.interlace, shutter_s=args.shutter)
     if not 1 <= args.stops <= 30:
         raise ConfigError(f'demo: --stops must be 1..30, got {args.stops}')
     from .evaluation.demo_system import run_system_demo

@@ -374,7 +374,8 @@ DEMO_TARGETS = {'fix_coverage': 0.45, 'error_p95_m': 0.04, 'error_max_m': 0.20}
 
 def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: str = 'out',
                    seed: int = 7, estimator: str = 'exact', zoom_control: bool = True,
-                   feed_forward: bool = True, interlace: bool = False) -> int:
+                   feed_forward: bool = True, interlace: bool = False,
+                   shutter_s: float = 0.004) -> int:
     """Drive a floor route with sim, camera_driver and locator; print, plot, write the summary."""
     from dataclasses import replace
     from .drive_demo import (DriveSetup, judge, plot_drive, room_table, run_drive,
@@ -385,14 +386,16 @@ def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: 
     world = load_floor_world()
     setup = DriveSetup(route=route, max_speed_m_s=max_speed_m_s, seed=seed,
                        estimator=estimator, zoom_control=zoom_control,
-                       feed_forward=feed_forward, interlace=interlace)
+                       feed_forward=feed_forward, interlace=interlace, shutter_s=shutter_s)
     drive_route = world.route(route, replace(world.limits, max_speed_m_s=max_speed_m_s))
     print(f'pattern_locator demo: sim + camera_driver + locator over DDS (domain '
           f"{os.environ.get('ROS_DOMAIN_ID', '0')}): the robot drives route '{route}' of "
           f'floor {world.floor} ({drive_route.length_m:.0f} m, {drive_route.duration_s:.0f} s '
           f'at up to {max_speed_m_s} m/s) through corridors and rooms; EVI-D31 emulated on a '
           f'pseudo-terminal; odometry fed forward to the head: '
-          f"{'yes' if feed_forward else 'no'}; logs in {out}/", flush=True)
+          f"{'yes' if feed_forward else 'no'}; shutter "
+          f"{f'{shutter_s * 1000:g} ms' if shutter_s else 'auto (20 ms)'}; logs in {out}/",
+          flush=True)
     started = time.monotonic()
     observer = run_drive(out, setup, progress=True)
     wall = time.monotonic() - started

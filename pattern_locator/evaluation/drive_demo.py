@@ -264,7 +264,11 @@ class DriveSetup:
     as_hung_seed: int = -1
     feed_forward: bool = True
     interlace: bool = False
-    exposure_s: float = 0.02
+    exposure_s: float = 0.02          # the camera's shutter in its automatic exposure
+    # The driver sets the camera's shutter (shutter priority; 0: its automatic
+    # exposure). 1/250 s smears a card a fifth as much while the head slews;
+    # the camera's gain makes up the light, with five times the noise.
+    shutter_s: float = 0.004
     frame_rate_hz: float = 10.0
     estimator: str = 'exact'
     zoom_control: bool = True          # the driver zooms on its card (a far card's fix)
@@ -335,6 +339,7 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                     # soon, briskly, at the tilt where cards are seen from the corridor.
                     'search_after_s:=1.0', 'search_speed_deg_s:=30.0',
                     'search_tilt_levels_deg:=[10.0, 0.0]',
+                    f'shutter_s:={float(setup.shutter_s)}',
                     *setup.driver_parameters], setup.namespace, sim_time) as driver, \
                 node_process('locator_node', out / 'locator.log', [
                     f'building_map:={locator_map}',
@@ -347,6 +352,8 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                     # EKF would weigh (the node's default keeps them, up to 1 m), but
                     # the drive is judged on the error of every fix published.
                     'gates.max_position_sigma_m:=0.025',
+                    # The blur term of the covariance: the shutter the camera exposes with.
+                    f'uncertainty.exposure_s:={float(setup.shutter_s or setup.exposure_s)}',
                     *setup.locator_parameters], setup.namespace, sim_time) as locator:
             deadline = time.monotonic() + timeout
             finished_at = None

@@ -206,7 +206,8 @@ _UNCERTAINTY_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
                         'noise', 0.0, 10.0),
     'blur_sigma_per_px': ('dot-centre noise added per pixel of predicted smear (px/px)', 0.0,
                           1.0),
-    'exposure_s': ("the camera's shutter time, of each field when interlaced (s)", 0.0, 1.0),
+    'exposure_s': ("the camera's shutter time, of each field when interlaced (s; the "
+                   "camera_driver's shutter_s when it sets one)", 0.0, 1.0),
     'field_period_s': ("time between an interlaced frame's two fields; 0: a progressive camera "
                        '(s)', 0.0, 0.1),
     'joint_stamp_sigma_s': ("RMS error of the joint states' stamps against when the camera "

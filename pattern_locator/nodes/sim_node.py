@@ -102,8 +102,9 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('n_stops', 30, 'paper world: stops of the paper route to drive', 1, 30),
     Param('seed', 7, 'seed of the headings, the odometry and the image noise', 0, 2 ** 31),
     Param('frame_rate_hz', 10.0, 'camera frame rate', 0.5, 60.0, dynamic=True),
-    Param('exposure_s', 0.02, 'shutter time of a frame (of each field when interlaced)',
-          0.0, 0.2),
+    Param('exposure_s', 0.02, "the camera's shutter in its automatic exposure, of each "
+          'field when interlaced (the light is set for it; a shorter shutter the driver '
+          'sets is made up with gain and noise)', 0.0, 0.2),
     Param('motion_blur', True, 'smear the cards along their motion during the exposure'),
     Param('interlace', False, 'two fields 1 / field_rate_hz apart, the even rows first (an '
           'analogue camera on a frame grabber)'),
@@ -202,7 +203,9 @@ class LoopedRoute:
 def build_sim(p: Dict[str, Any]) -> Tuple[FloorSim, LoopedRoute, str]:
     """Return the sim of the node's parameters, its looping route and a line describing it."""
     head = HeadGeometry(mount_pitch_rad=math.radians(p['head_mount_pitch_deg']))
-    exposure = Exposure(exposure_s=p['exposure_s'], interlace=p['interlace'],
+    # The scene's light is set for the camera's automatic exposure (reference_s).
+    exposure = Exposure(exposure_s=p['exposure_s'], reference_s=p['exposure_s'] or 0.02,
+                        interlace=p['interlace'],
                         field_period_s=1.0 / p['field_rate_hz'], blur=p['motion_blur'])
     odometry = OdometryModel(scale_error=p['odom_scale_error'],
                              yaw_bias_rad_s=p['odom_yaw_bias_rad_s'],
@@ -264,10 +267,12 @@ class SimNode(Node):
         link = p['camera_link'] or default_camera_link()
         Path(link).parent.mkdir(parents=True, exist_ok=True)
         self.camera = EmulatedEviD31(field_rate_hz=p['field_rate_hz'], init_s=p['init_s'],
-                                     link_path=link, seed=p['seed']).start()
+                                     link_path=link, seed=p['seed'],
+                                     auto_shutter_s=p['exposure_s']).start()
         self._head = HeadTrack(max_samples=128)
         self._head_lock = threading.Lock()
         self._zoom_units = 0.0
+        self._shutter_s = p['exposure_s']
         self._clock_origin = time.monotonic()
         self._route_start: Optional[float] = None
         self._route_start_stamp = 0
@@ -347,6 +352,7 @@ class SimNode(Node):
             self._head.add(state.stamp, -math.radians(state.pan_deg),
                            math.radians(state.tilt_deg))
             self._zoom_units = state.zoom_units
+            self._shutter_s = state.shutter_s
             return state.stamp
 
     def _head_at(self, mono: float) -> Tuple[float, float]:
@@ -418,6 +424,10 @@ class SimNode(Node):
 
     def _frame(self) -> None:
         now = self._sample_head()
+        if self._shutter_s != self.sim.exposure.exposure_s:
+            # The camera's shutter now (the driver may set it): the frame's
+            # exposure, its blur, and the gain that makes up its light.
+            self.sim.exposure = replace(self.sim.exposure, exposure_s=self._shutter_s)
         origin = self._route_start if self._started(now) else now
         t = self.sim.exposure.latest_stamp(now - origin)
         if self._route_start is not None and not self._finished and \
@@ -508,6 +518,8 @@ class SimNode(Node):
             'frames': self._frames, 'late frames': self._late_frames,
             'render ms median': f'{statistics.median(render):.1f}' if render else '',
             'render ms max': f'{max(render):.1f}' if render else '',
+            # The camera's shutter the frames are exposed with (the driver may set it).
+            'exposure ms': f'{self.sim.exposure.exposure_s * 1e3:g}',
             'odometry messages': self._odometry_sent,
         }
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]

@@ -48,6 +48,9 @@ def test_the_short_route_locates_the_robot_and_never_a_wrong_card(short_drive):
     # The locator's own counts and stage times reach the summary (what explains
     # the coverage: frames dropped while busy, rejections, time per frame).
     assert int(metrics.locator['received']) >= metrics.images // 2, metrics.locator
+    # The driver set the camera's shutter (1/250 s) and the sim exposes with
+    # what the emulated camera does.
+    assert observer.sim_status['exposure ms'] == '4', observer.sim_status
     assert 'processing_ms_median' in metrics.locator, metrics.locator
     # Bounds the system meets today, with the margin a loaded 2-core machine
     # needs (the final targets, 95 % and 1/3/10 cm, need the map-guided

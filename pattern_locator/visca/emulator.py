@@ -200,8 +200,9 @@ class EmulatedEviD31:
                  baud: int = DEFAULT_BAUD, auto_shutter_s: float = 0.02) -> None:
         if field_rate_hz <= 0.0:
             raise ValueError(f'field rate {field_rate_hz} Hz is not positive')
-        if not (math.isfinite(auto_shutter_s) and 0.0 < auto_shutter_s <= 1.0):
-            raise ValueError(f'auto exposure time {auto_shutter_s} s is not in (0, 1]')
+        # 0: an idealised instant exposure (a sim without motion blur).
+        if not (math.isfinite(auto_shutter_s) and 0.0 <= auto_shutter_s <= 1.0):
+            raise ValueError(f'auto exposure time {auto_shutter_s} s is not in [0, 1]')
         self.field_rate_hz = float(field_rate_hz)
         self.link_path = os.fspath(link_path) if link_path is not None else None
         # 8N1: ten bit times per byte.

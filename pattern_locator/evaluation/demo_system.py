@@ -289,6 +289,8 @@ def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
                 namespace) as sim, \
                 node_process('camera_driver_node', out / 'camera_driver.log', [
                     f'port:={link}', f'zoom_control:={str(zoom_control).lower()}',
+                    # The driver aims through the head's kinematics: the same mount.
+                    f'head_mount_pitch_deg:={MOUNT_PITCH_DEG}',
                     # Stops are far apart: look for the next card soon and briskly.
                     'search_after_s:=1.0', 'search_speed_deg_s:=30.0',
                     f'search_tilt_levels_deg:=[{SEARCH_TILT_DEG}]',

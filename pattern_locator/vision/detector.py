@@ -26,6 +26,7 @@ from typing import Iterable, Iterator, List, Optional, Tuple
 
 import numpy as np
 
+from . import card_kernels
 from .camera import CameraModel
 from .cards import (apply_h, CardGuess, far_candidates, fit_homography, group,
                     rank_candidates, rotation_about_z)
@@ -364,10 +365,11 @@ def _centre_blob(fine, u: float, v: float, radius: float) -> Optional[int]:
 
 def _ellipse_fill(blobs, j: int) -> float:
     """Blob ``j``'s area over the area of the ellipse of its second moments (1 for an ellipse)."""
-    small, big = np.linalg.eigvalsh(blobs.covariance(j))
-    if not small > 0.0:
-        return 0.0
-    return float(blobs.area[j] / (4.0 * np.pi * np.sqrt(small * big)))
+    # Semi-axes twice the moments' standard deviations: pi * 4 * sqrt(det).
+    xx, xy, yy = card_kernels.blob_covariance(blobs.labels, blobs.box[j], int(blobs.label[j]),
+                                              int(blobs.scale))
+    det = xx * yy - xy * xy
+    return float(blobs.area[j] / (4.0 * np.pi * np.sqrt(det))) if det > 0.0 else 0.0
 
 
 def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:

@@ -601,9 +601,10 @@ def ring_of_spots(spots, radius, reach, min_spots):
     Whether faint spots (offsets (N, 2) from a small centre) look like its rings.
 
     The spots between 1.5 centre radii and ``reach``: at least ``min_spots``
-    of them, in at least five of the eight directions, their mean near
-    the centre (within 0.4 times their median distance). Returns
-    ``(ring-like, number of ring spots)``.
+    of them, in at least four of the eight directions (a steep far card's
+    rings, their dots merged or too pale in some directions, showed four),
+    their mean near the centre (within 0.4 times their median distance).
+    Returns ``(ring-like, number of ring spots)``.
     """
     n = spots.shape[0]
     rho = np.empty(n)
@@ -624,7 +625,7 @@ def ring_of_spots(spots, radius, reach, min_spots):
             octants[int((math.atan2(y, x) + math.pi) * (8 / (2 * math.pi))) % 8] = True
             sx += x
             sy += y
-        ring_like = _count_true(octants) >= 5 \
+        ring_like = _count_true(octants) >= 4 \
             and not math.hypot(sx / m, sy / m) > 0.4 * _median(rho[:m])
     return ring_like, m
 

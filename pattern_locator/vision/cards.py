@@ -144,8 +144,8 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
                                            2.0 * blobs.area[ci] + 8.0, float(white[k]),
                                            float(noise[k]))
         # A centre dot is a dot, not the darkest part of a bigger dark thing,
-        # and its rings' spots are all round it: in most of the eight
-        # directions, their mean near the centre.
+        # and its rings' spots are all round it: in half the eight
+        # directions or more, their mean near the centre.
         if own > 6.0 * blobs.area[ci]:
             continue
         ring_like, n_ring = card_kernels.ring_of_spots(_f64(spots), radius, reach,

@@ -162,3 +162,33 @@ def test_dot_under_a_black_object_is_not_read_as_black():
     detector = Detector(CFG, known_codes=[code, CFG.encode(0, 1, 1), near])
     found = [c.ids.as_tuple() for c in detector.detect(image, HD) if c.ids is not None]
     assert found == [frame['ids']]
+
+
+# Far and steep: a card at 6.6 m seen 54 degrees off its axis. Decimated, its
+# ring dots are too pale to be blobs, so only the far candidates' faint spots
+# can make its centre a candidate; of its two rings those spots showed dots
+# in four of the eight directions round the centre (the others merged or too
+# pale at the faint threshold), and five were asked for.
+FAR_STEEP = {
+    'camera': HD, 'distance': 6.5947, 'tilt': 54.0306, 'azimuth': 323.045, 'roll': -28.994,
+    'offset': (-333.42, -247.28), 'ids': (11, 17, 6), 'gain': 0.7913,
+    'colour_cast': (0.9951, 0.9953, 1.0451), 'gradient': 0.1901,
+    'gradient_angle_deg': 57.9215, 'defocus_sigma_px': 0.8467, 'noise_sigma': 2.1981,
+    'shot_noise': 0.0099, 'crosstalk': 0.0859, 'background': 'clutter', 'seed': 556351291}
+
+
+def test_far_steep_cards_faint_ring_in_four_directions_is_a_candidate():
+    frame = FAR_STEEP
+    image, dots = render(**frame)
+    dot_image = segment(image, DETECTOR.params)
+    blobs = dot_image.blobs
+    centre = int(np.argmin(np.hypot(blobs.u - dots[0, 0], blobs.v - dots[0, 1])))
+    # The class: no ranked candidate there; found through the faint ring only.
+    ranked = card_stage.rank_candidates(blobs, CFG, DETECTOR.params,
+                                        dot_image.noise_at(blobs.u, blobs.v))
+    assert centre not in ranked
+    far = card_stage.far_candidates(dot_image, CFG, ranked, np.zeros(len(blobs), dtype=bool))
+    assert centre in far
+    assert ids_found(image, HD) == [frame['ids']]
+    mirror, _ = render(**frame, mirrored=True)
+    assert ids_found(mirror, HD) == []

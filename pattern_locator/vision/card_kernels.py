@@ -1192,6 +1192,53 @@ def combed_tiles(image, tile_rows):
 
 
 @_kernel
+def component_stats(labels, n):
+    """
+    OpenCV's connected-component statistics from a label image: (stats, centroids).
+
+    ``labels`` (H, W int32) holds ``n`` labels, 0 the background. ``stats``
+    (n, 5 int32) is (x, y, width, height, area) per label and ``centroids``
+    (n, 2) the mean pixel (x, y), as ``cv2.connectedComponentsWithStats``
+    gives them (integer sums, so the same to the bit); row 0 (the
+    background) is left zero. OpenCV's statistics pass costs three times
+    its labelling on the decimated image, empty or not; this one pass over
+    the labels costs about one.
+    """
+    h, w = labels.shape
+    m = max(n, 1)
+    stats = np.zeros((m, 5), dtype=np.int32)
+    centroids = np.zeros((m, 2))
+    sx = np.zeros(m, dtype=np.int64)
+    sy = np.zeros(m, dtype=np.int64)
+    area = np.zeros(m, dtype=np.int64)
+    x0 = np.full(m, w, dtype=np.int32)
+    y0 = np.full(m, h, dtype=np.int32)
+    x1 = np.full(m, -1, dtype=np.int32)
+    y1 = np.full(m, -1, dtype=np.int32)
+    for y in range(h):
+        for x in range(w):
+            label = labels[y, x]
+            if label > 0 and label < m:
+                area[label] += 1
+                sx[label] += x
+                sy[label] += y
+                x0[label] = min(x0[label], x)
+                x1[label] = max(x1[label], x)
+                y0[label] = min(y0[label], y)
+                y1[label] = max(y1[label], y)
+    for label in range(1, m):
+        if area[label] > 0:
+            stats[label, 0] = x0[label]
+            stats[label, 1] = y0[label]
+            stats[label, 2] = x1[label] - x0[label] + 1
+            stats[label, 3] = y1[label] - y0[label] + 1
+            stats[label, 4] = area[label]
+            centroids[label, 0] = sx[label] / area[label]
+            centroids[label, 1] = sy[label] / area[label]
+    return stats[:n], centroids[:n]
+
+
+@_kernel
 def dot_components(stats, centroids, scale, ox, oy, max_area, h, w):
     """
     Keep the components of a (h, w) mask that could be dots; their centres in image pixels.
@@ -1321,6 +1368,7 @@ def warm_up() -> float:
     image = np.zeros((40, 40, 3), dtype=np.uint8)
     image.flags.writeable = False
     combed_tiles(image, 16)
+    component_stats(labels, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
     faint_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)
     return time.perf_counter() - start

@@ -146,7 +146,25 @@ def test_one_compiled_signature_per_kernel_after_detections():
     frozen.flags.writeable = False
     assert detector.detect(frozen, VGA)
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
-               card_kernels.threshold, card_kernels.faint_components]
+               card_kernels.threshold, card_kernels.faint_components,
+               card_kernels.component_stats]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
+
+
+def test_component_statistics_are_opencvs():
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        h, w = rng.integers(1, 70, size=2)
+        mask = (rng.random((h, w)) < rng.uniform(0.0, 0.8)).astype(np.uint8) * 255
+        n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+            mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
+        got_stats, got_centroids = card_kernels.component_stats(labels, n)
+        assert got_stats.shape == (n, 5) and got_centroids.shape == (n, 2)
+        assert np.array_equal(got_stats[1:], stats[1:])
+        assert np.array_equal(got_centroids[1:], centroids[1:])
+    # Labels beyond the count given are ignored, not written out of bounds.
+    labels = np.array([[0, 1], [2, 7]], dtype=np.int32)
+    stats, _ = card_kernels.component_stats(labels, 2)
+    assert stats[1].tolist() == [1, 0, 1, 1, 1]

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import math
 from typing import Dict, Optional, Tuple
 
-import cv2
 import numpy as np
 
 from . import card_kernels
+from .fit_kernels import fit_homography_points
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
@@ -271,8 +271,8 @@ def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_erro
     inliers = np.ones(len(obj), dtype=bool)
     tol = np.empty(len(obj))
     for step in range(4):
-        H, _ = cv2.findHomography(obj[inliers], img[inliers], 0)
-        if H is None:
+        ok, H = fit_homography_points(obj[inliers], img[inliers])
+        if not ok:
             return None, None
         ok, now, count, same = card_kernels.homography_inliers(
             H, obj, img, radii, max_error, min_tolerance, tol, inliers, step == 0)

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from .camera import CameraModel
+from .fit_kernels import refine_pose
 from .geometry import Pose
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
@@ -298,11 +299,13 @@ def _refined_candidate(obj, observed, K, rvec, tvec):
 
 def _refine_lm(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, rvec: np.ndarray,
                tvec: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Levenberg-Marquardt on the reprojection error in the ideal image."""
-    rvec, tvec = cv2.solvePnPRefineLM(
-        obj, observed.reshape(-1, 1, 2), K, None, rvec.reshape(3, 1).copy(),
-        tvec.reshape(3, 1).copy(), (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 1e-10))
-    return rvec.reshape(3), tvec.reshape(3)
+    """Levenberg-Marquardt on the reprojection error in the ideal image (compiled)."""
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    R, t = refine_pose(np.ascontiguousarray(obj, dtype=np.float64),
+                       np.ascontiguousarray(observed, dtype=np.float64),
+                       np.ascontiguousarray(K, dtype=np.float64), R,
+                       np.asarray(tvec, dtype=np.float64).reshape(3).copy())
+    return _rvec(R), t
 
 
 def _camera_jacobian(T_camera_pattern: Pose, obj: np.ndarray, K: np.ndarray) -> np.ndarray:

@@ -40,3 +40,31 @@ def test_degenerate_points_are_refused():
     bad[1, 0] = np.nan
     ok, H = fit_homography_points(square, bad)
     assert not ok and not np.any(H)
+
+
+def test_the_pose_refinement_reaches_opencvs_optimum_or_better():
+    from pattern_locator.card.pattern import PatternConfig
+    from pattern_locator.vision.fit_kernels import refine_pose
+
+    rng = np.random.default_rng(5)
+    obj = PatternConfig().model_points().astype(float)
+    K = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
+
+    def cost(R, t):
+        p = obj @ R.T + t
+        return np.sum((p[:, :2] / p[:, 2:] * 1000.0 + [320.0, 240.0] - img) ** 2)
+
+    for _ in range(300):
+        rvec = rng.normal(0.0, 0.6, 3)
+        tvec = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(1.2, 8.0)])
+        img, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
+        img = img.reshape(-1, 2) + rng.normal(0.0, rng.choice([0.02, 0.3, 1.0]), (len(obj), 2))
+        r0, t0 = rvec + rng.normal(0.0, 0.02, 3), tvec + rng.normal(0.0, 0.02, 3)
+        r_cv, t_cv = cv2.solvePnPRefineLM(
+            obj, img.reshape(-1, 1, 2), K, None, r0.reshape(3, 1).copy(), t0.reshape(3, 1).copy(),
+            (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 1e-10))
+        R, t = refine_pose(obj, img, K, cv2.Rodrigues(r0)[0], t0.copy())
+        R_cv = cv2.Rodrigues(r_cv)[0]
+        assert np.allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert cost(R, t) <= cost(R_cv, t_cv.ravel()) * (1 + 1e-9) + 1e-12
+        assert np.max(np.abs(t - t_cv.ravel())) < 1e-3

@@ -1194,7 +1194,7 @@ def combed_tiles(image, tile_rows):
 @_kernel
 def component_stats(labels, n):
     """
-    OpenCV's connected-component statistics from a label image: (stats, centroids).
+    Return OpenCV's connected-component statistics from a label image: (stats, centroids).
 
     ``labels`` (H, W int32) holds ``n`` labels, 0 the background. ``stats``
     (n, 5 int32) is (x, y, width, height, area) per label and ``centroids``

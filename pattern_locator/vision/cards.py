@@ -23,10 +23,10 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from . import card_kernels
-from .fit_kernels import fit_homography_points
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
+from .fit_kernels import fit_homography_points
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.

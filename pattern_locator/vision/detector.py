@@ -355,7 +355,7 @@ class Detector:
 
 
 def _centre_blob(fine, u: float, v: float, radius: float) -> Optional[int]:
-    """The biggest of ``fine``'s blobs within ``radius`` (at least 2 px) of (u, v); None if none."""
+    """Return the biggest of ``fine``'s blobs within ``radius`` (>= 2 px) of (u, v), or None."""
     if len(fine) == 0:
         return None
     d = np.hypot(fine.u - u, fine.v - v)

@@ -1,4 +1,4 @@
-"""The compiled homography fit (fit_kernels): OpenCV's least-squares map, refused when degenerate."""
+"""The compiled fits (fit_kernels): OpenCV's least-squares maps, refused when degenerate."""
 
 import cv2
 import numpy as np

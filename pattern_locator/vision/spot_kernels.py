@@ -832,3 +832,63 @@ def box3(a):
             for x in range(size):
                 out[y, x, ch] = _box3_at(a[:, :, ch], x, y)
     return out
+
+
+@numba.njit(cache=True, nogil=False)
+def _median_of(values, count):
+    """Median of ``values[:count]`` (the middle one, or the mean of the two), NaN when empty."""
+    if count == 0:
+        return np.nan
+    s = np.sort(values[:count])
+    m = count // 2
+    return s[m] if count % 2 else (s[m - 1] + s[m]) / 2
+
+
+@numba.njit(cache=True, nogil=False)
+def paper_noise(source, pts, roomy):
+    """
+    The card's white and noise from 3x3 patches at paper points: (white, spread, roomy spread).
+
+    ``source`` (h, w, C) uint8; ``pts`` (N, 2) image points at least 2 px
+    inside it (rounded to the nearest pixel, half to even as numpy's);
+    ``roomy`` (N) the points with room round them. ``white`` (C, float32)
+    is the median over the points of each channel's centre pixel;
+    ``spread`` the median over the points of the mean absolute deviation
+    of the darkest channel from its patch mean, and ``roomy spread`` the
+    same over the roomy points (:func:`.centres.card_paper` says why).
+    """
+    n = pts.shape[0]
+    channels = source.shape[2]
+    centre = np.empty(n, dtype=np.float32)
+    white = np.empty(channels, dtype=np.float32)
+    spread = np.empty(n)
+    chosen = np.empty(n)
+    patch = np.empty(9)
+    xs = np.empty(n, dtype=np.intp)
+    ys = np.empty(n, dtype=np.intp)
+    for i in range(n):
+        xs[i] = int(np.rint(pts[i, 0]))
+        ys[i] = int(np.rint(pts[i, 1]))
+    for ch in range(channels):
+        for i in range(n):
+            centre[i] = source[ys[i], xs[i], ch]
+        white[ch] = _median_of(centre, n)
+    count = 0
+    for i in range(n):
+        total = 0.0
+        for dy in range(3):
+            for dx in range(3):
+                darkest = 255
+                for ch in range(channels):
+                    darkest = min(darkest, source[ys[i] + dy - 1, xs[i] + dx - 1, ch])
+                patch[3 * dy + dx] = darkest
+                total += darkest
+        mean = total / 9.0
+        deviation = 0.0
+        for k in range(9):
+            deviation += abs(patch[k] - mean)
+        spread[i] = deviation / 9.0
+        if roomy[i]:
+            chosen[count] = spread[i]
+            count += 1
+    return white, _median_of(spread, n), _median_of(chosen, count)

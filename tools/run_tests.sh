@@ -7,7 +7,8 @@
 # two closed loops at once; the ROS-free tests (detector, survey, lint) are
 # CPU-bound and fill the other core, with the VISCA tests (a pseudo-terminal,
 # mostly waiting: 43 s of wall for 5 s of CPU), which balances the two.
-# Each process gets its own ROS domain.
+# Each process gets its own ROS domain: ROS_DOMAIN_ID for the ROS tests and
+# CORE_ROS_DOMAIN_ID (default 51 domains on) for the rest.
 # Usage: tools/run_tests.sh PYTHON [PYTEST OPTIONS...]
 set -uo pipefail
 py=${1:?usage: tools/run_tests.sh PYTHON [PYTEST OPTIONS...]}
@@ -15,7 +16,8 @@ shift
 base=${ROS_DOMAIN_ID:-$(( ($$ % 100) + 101 ))}
 core_log=$(mktemp "${TMPDIR:-/tmp}/pattern_locator_core_tests.XXXXXX")
 trap 'rm -f "$core_log"' EXIT
-ROS_DOMAIN_ID=$(( (base + 50) % 232 + 1 )) "$py" -m pytest -q "$@" test \
+core_domain=${CORE_ROS_DOMAIN_ID:-$(( (base + 50) % 232 + 1 ))}
+ROS_DOMAIN_ID=$core_domain "$py" -m pytest -q "$@" test \
     --ignore=test/nodes >"$core_log" 2>&1 &
 core=$!
 echo "ROS tests (test/nodes):"

@@ -170,7 +170,7 @@ def _tracking_errors(frames, route):
     return phases
 
 
-def pass_by_card_route(dwell_s: float = 4.0) -> SimRoute:
+def pass_by_card_route(dwell_s: float = 3.0) -> SimRoute:
     """Return 2 m along the wall 3 m from card 2 at 0.3 m/s; it starts 18 deg off-centre."""
     return SimRoute([RouteStop((2.0, 2.0), math.pi / 2, 2), RouteStop((4.0, 2.0), math.pi / 2, 2)],
                     mode='drive', dwell_s=dwell_s, speed_m_s=0.3)
@@ -283,11 +283,11 @@ def test_two_namespaced_robots_side_by_side_on_one_domain(tmp_path):
 def test_demo_runs_end_to_end_within_its_tolerance(tmp_path):
     out = tmp_path / 'out'
     proc = subprocess.run(
-        # 5 s at each stop: the route may start as soon as the locator subscribes,
-        # before the driver's first search found the card (the first fix then
-        # comes 3.3-3.5 s into the route).
+        # The demo's own dwell (2.5 s a stop): the sim starts the route once the
+        # locator has found the first card (wait_for_target), not while DDS
+        # discovery and the head's first search are still under way.
         [sys.executable, '-m', 'pattern_locator.cli', 'demo', '--route', 'paper-stops',
-         '--stops', '4', '--dwell', '5', '--output-dir', str(out)], capture_output=True,
+         '--stops', '4', '--dwell', '2.5', '--output-dir', str(out)], capture_output=True,
         text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     rows = re.findall(r'^\s+\d+\s+(\d+)\s+(?:[-\d.]+\s+){6}([\d.]+)\s+1/3/\d$', proc.stdout,

@@ -64,9 +64,11 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         # locator does: its centre in the optical frame of "the image", stamped then.
         info_pub = node.create_publisher(CameraInfo, 'camera/camera_info', 10)
 
-        def aim(pan_goal, tilt_goal, seconds, info=None):
+        def aim(pan_goal, tilt_goal, seconds, info=None, until=None):
+            # Targets for ``seconds``, or until ``until()`` holds (the checks
+            # below still decide: a head that never gets there fails them).
             end = time.monotonic() + seconds
-            while time.monotonic() < end:
+            while time.monotonic() < end and not (until is not None and until()):
                 state = camera.state()
                 msg = PointStamped()
                 msg.header.stamp = node.get_clock().now().to_msg()
@@ -82,7 +84,15 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
 
         assert spin_until(executor, lambda: node.count_subscribers(
             '/pattern_locator/target') > 0, 10.0)
-        aim(0.3, 0.1, 3.0)
+        def at(pan_goal, tilt_goal):
+            # The head and its last joint state both within 0.5 deg of the goal.
+            state = camera.state()
+            return (joints and abs(-math.radians(state.pan_deg) - pan_goal) < math.radians(0.5)
+                    and abs(math.radians(state.tilt_deg) - tilt_goal) < math.radians(0.5)
+                    and abs(joints[-1].position[0] - pan_goal) < math.radians(0.5)
+                    and abs(joints[-1].position[1] - tilt_goal) < math.radians(0.5))
+
+        aim(0.3, 0.1, 3.0, until=lambda: at(0.3, 0.1))
         state = camera.state()
         assert state.pan_deg == pytest.approx(-math.degrees(0.3), abs=1.0)   # VISCA: right = +
         assert state.tilt_deg == pytest.approx(math.degrees(0.1), abs=1.0)
@@ -106,7 +116,7 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         aim(-0.2, 0.0, 1.0)
         assert camera.state().pan_deg == pytest.approx(held, abs=0.2), 'tracking is off'
         assert params.set_value('tracking', True) == (True, '')
-        aim(-0.2, 0.0, 2.5)
+        aim(-0.2, 0.0, 2.5, until=lambda: at(-0.2, 0.0))
         assert camera.state().pan_deg == pytest.approx(math.degrees(0.2), abs=1.0)
         assert spin_until(executor, lambda: diagnostics and diagnostics[-1].status[0].level
                           == DiagnosticStatus.OK, 3.0), diagnostics[-1].status[0].message
@@ -117,12 +127,12 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
         fill_camera_info(info, CameraModel.from_fov(640, 480, 60.0))
         zoom = camera.state().zoom_units
         assert params.set_value('zoom_control', True)[0]
-        aim(-0.2, 0.0, 2.0, info)
+        aim(-0.2, 0.0, 2.0, info, until=lambda: camera.state().zoom_units > zoom + 100)
         assert camera.state().zoom_units > zoom + 100, (zoom, camera.state())
         assert params.set_value('zoom_control', False)[0]
         # A card behind the image plane (the gaze planner's handover to a card
         # more than 90 deg off the axis, z < 0): the head turns to it.
-        aim(1.6, 0.0, 3.0)
+        aim(1.6, 0.0, 3.0, until=lambda: at(1.6, 0.0))
         assert camera.state().pan_deg == pytest.approx(-math.degrees(1.6), abs=1.0)
 
         # Garbage on the line and a Network Change: joint states keep coming.

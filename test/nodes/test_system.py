@@ -84,6 +84,7 @@ def test_camera_driver_drives_the_emulated_camera_and_survives_faults(tmp_path, 
 
         assert spin_until(executor, lambda: node.count_subscribers(
             '/pattern_locator/target') > 0, 10.0)
+
         def at(pan_goal, tilt_goal):
             # The head and its last joint state both within 0.5 deg of the goal.
             state = camera.state()

@@ -24,12 +24,18 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg package.xml
 	  if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))'; then \
 	    rm -rf $(VENV) && $$py312 -m venv $(VENV); fi
 	$(PY) -m pip install --quiet --disable-pip-version-check --upgrade pip
-	$(PY) -m pip install --quiet --disable-pip-version-check \
-	  -r requirements.txt -r requirements-dev.txt
-	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	@# The detector's compiled passes: built once here (about 40 s of one core)
 	@# into numba's cache beside the modules, not in every test process at once.
-	$(PY) -c 'import pattern_locator.vision.detector'
+	@# What the detector imports goes in first, so that they compile while pip
+	@# installs the rest on the other core.
+	$(PY) -m pip install --quiet --disable-pip-version-check \
+	  $$(grep -E '^(numpy|numba|opencv-python-headless|PyYAML)==' requirements.txt)
+	PYTHONPATH=$(CURDIR) $(PY) -c 'import pattern_locator.vision.detector' & kernels=$$!; \
+	  $(PY) -m pip install --quiet --disable-pip-version-check \
+	    -r requirements.txt -r requirements-dev.txt && \
+	  $(PY) -m pip install --quiet --disable-pip-version-check --no-deps \
+	    --no-build-isolation -e .; \
+	  status=$$?; wait $$kernels && exit $$status
 	@touch $@
 
 venv: $(STAMP)

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # make test: the ROS-free tests and the ROS tests side by side, each in order.
 #
-# Two pytest processes on the two cores, not pytest-xdist: the ROS tests
-# (node processes over DDS, pseudo-terminals, module-wide node fixtures that
-# later tests build on) must run one after another in file order, and never
-# two closed loops at once; the ROS-free tests (detector, survey, lint) are
-# CPU-bound and fill the other core, with the VISCA tests (a pseudo-terminal,
-# mostly waiting: 43 s of wall for 5 s of CPU), which balances the two.
-# Each process gets its own ROS domain.
+# The ROS tests in one pytest process, not pytest-xdist: they (node
+# processes over DDS, pseudo-terminals, module-wide node fixtures that later
+# tests build on) must run one after another in file order, and never two
+# closed loops at once. The ROS-free tests (detector, survey, lint: CPU-bound;
+# the VISCA tests, a pseudo-terminal, mostly waiting) beside them on two
+# xdist workers at a lower priority, which fill what the ROS side leaves of
+# the two cores.
+# Each process gets its own ROS domain: ROS_DOMAIN_ID for the ROS tests and
+# CORE_ROS_DOMAIN_ID (default 51 domains on) for the rest.
 # Usage: tools/run_tests.sh PYTHON [PYTEST OPTIONS...]
 set -uo pipefail
 py=${1:?usage: tools/run_tests.sh PYTHON [PYTEST OPTIONS...]}
@@ -15,7 +17,11 @@ shift
 base=${ROS_DOMAIN_ID:-$(( ($$ % 100) + 101 ))}
 core_log=$(mktemp "${TMPDIR:-/tmp}/pattern_locator_core_tests.XXXXXX")
 trap 'rm -f "$core_log"' EXIT
-ROS_DOMAIN_ID=$(( (base + 50) % 232 + 1 )) "$py" -m pytest -q "$@" test \
+core_domain=${CORE_ROS_DOMAIN_ID:-$(( (base + 50) % 232 + 1 ))}
+# The ROS-free side on two pytest-xdist workers (a test file at a time, so
+# that a module fixture is made once), niced: the ROS tests' nodes run in
+# real time and get a core when they need one; these fill the rest.
+ROS_DOMAIN_ID=$core_domain nice -n 10 "$py" -m pytest -q -n 2 --dist loadfile "$@" test \
     --ignore=test/nodes >"$core_log" 2>&1 &
 core=$!
 echo "ROS tests (test/nodes):"

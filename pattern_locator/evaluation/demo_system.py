@@ -285,6 +285,10 @@ def run_closed_loop(out: Path, route: SimRoute, estimator: str = 'exact',
                 f'dwell_s:={route.dwell_s}', f'mode:={route.mode}',
                 f'speed_m_s:={route.speed_m_s}',
                 f'head_mount_pitch_deg:={MOUNT_PITCH_DEG}',
+                # The route starts once the locator has found the first stop's
+                # card: the first stop's dwell is not spent on DDS discovery
+                # and the head's first search.
+                'wait_for_target:=true',
                 *([route_stops_parameter(route)] if custom_route else [])],
                 namespace) as sim, \
                 node_process('camera_driver_node', out / 'camera_driver.log', [

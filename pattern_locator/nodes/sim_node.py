@@ -44,8 +44,14 @@ since the node started), which it publishes on ``/clock`` for nodes with
 at run time; the world, the route and the camera are read-only.
 
 The route clock starts once the camera has been addressed and has finished
-its power-up, and someone subscribes to the images (``wait_for_camera``);
-odometry starts with it (the odom frame is the base's pose at the start).
+its power-up, and someone subscribes to the images (``wait_for_camera``),
+and once the stack is up: the camera driver and a locator have found each
+other over DDS (``wait_for_stack``) and, with ``wait_for_target``, the
+locator has found a card and sent its first target; after
+``stack_timeout_s`` the route starts anyway, with a warning. A robot that
+starts driving before the stack is warm loses its first seconds to DDS
+discovery and the head's first search. Odometry starts with the route (the
+odom frame is the base's pose at the start).
 """
 
 from dataclasses import replace
@@ -128,6 +134,13 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('init_s', 1.0, "the emulated camera's power-up initialisation", 0.0, 30.0),
     Param('wait_for_camera', True, 'start the route once the camera is addressed and '
           'initialised and the images have a subscriber'),
+    Param('wait_for_stack', True, 'and once a camera driver and a locator have found each '
+          'other (camera/joint_states and pattern_locator/target each have a publisher and '
+          'a subscriber)'),
+    Param('wait_for_target', False, "and once the locator's first pattern_locator/target "
+          'came (it has found a card)'),
+    Param('stack_timeout_s', 20.0, 'start the route anyway (with a warning) after waiting '
+          'this long for the stack, once the camera is ready', 0.0, 600.0),
     Param('loop', False, 'drive the route again after its end', dynamic=True),
     Param('camera_frame', 'camera_optical_frame', 'frame of the images'),
     Param('jpeg_quality', 0, 'pass the images through JPEG at this quality (0: off)', 0, 100,
@@ -276,6 +289,11 @@ class SimNode(Node):
         self._clock_origin = time.monotonic()
         self._route_start: Optional[float] = None
         self._route_start_stamp = 0
+        # When the camera was first ready (the stack's wait runs from then).
+        self._camera_ready_at: Optional[float] = None
+        self._first_target = threading.Event()
+        # The odometry timer and the frame thread both ask whether the route runs.
+        self._start_lock = threading.Lock()
         self._finished = False
         self._frames = 0
         self._odometry_sent = 0
@@ -297,6 +315,11 @@ class SimNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.pub_clock = (self.create_publisher(Clock, '/clock', QoSProfile(
             depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)) if p['publish_clock'] else None)
+        # The locator's targets, only to know when it has found its first card
+        # (best effort: matches any publisher).
+        self._target_sub = (self.create_subscription(
+            PointStamped, 'pattern_locator/target', lambda _: self._first_target.set(),
+            qos_profile_sensor_data) if p['wait_for_target'] else None)
         self.get_logger().info(f'emulated EVI-D31 on {self.camera.port}')
         self.get_logger().info('sim configuration: ' + describe_values(p))
         self.get_logger().info(f'route: {what}')
@@ -359,18 +382,50 @@ class SimNode(Node):
         with self._head_lock:
             return self._head(mono)
 
+    def _stack_missing(self) -> List[str]:
+        """Return what the stack still lacks before the route may start (empty: ready)."""
+        missing = []
+        if self.params['wait_for_stack']:
+            # The graph as this node sees it: the driver publishes joint states
+            # to the locator, the locator targets to the driver.
+            own = 1 if self._target_sub is not None else 0
+            if not (self.count_publishers('camera/joint_states') > 0
+                    and self.count_subscribers('camera/joint_states') > 0):
+                missing.append('camera/joint_states publisher and subscriber')
+            if not (self.count_publishers('pattern_locator/target') > 0
+                    and self.count_subscribers('pattern_locator/target') > own):
+                missing.append('pattern_locator/target publisher and subscriber')
+        if self.params['wait_for_target'] and not self._first_target.is_set():
+            missing.append("the locator's first target")
+        return missing
+
     def _started(self, now: float) -> bool:
         """Return whether the route runs, starting it when everything is ready."""
         if self._route_start is not None:
             return True
-        state = self.camera.state()
-        ready = (self.camera.address is not None and state.powered
-                 and not state.initialising and self.pub_image.get_subscription_count() > 0)
-        if self.params['wait_for_camera'] and not ready:
+        with self._start_lock:
+            return self._route_start is not None or self._start_if_ready(now)
+
+    def _start_if_ready(self, now: float) -> bool:
+        if self.params['wait_for_camera']:
+            state = self.camera.state()
+            if not (self.camera.address is not None and state.powered
+                    and not state.initialising and self.pub_image.get_subscription_count() > 0):
+                return False
+        if self._camera_ready_at is None:
+            self._camera_ready_at = now
+        waited = now - self._camera_ready_at
+        missing = self._stack_missing()
+        if missing and waited < self.params['stack_timeout_s']:
             return False
         self._route_start = now
         self._route_start_stamp = self._stamp_ns(now)
-        self.get_logger().info('route started')
+        if missing:
+            self.get_logger().warning(f'route started after waiting {waited:.1f} s for the '
+                                      f'stack without {", ".join(missing)}')
+        else:
+            self.get_logger().info(f'route started (the stack was ready {waited:.1f} s after '
+                                   'the camera)')
         return True
 
     # Odometry ---------------------------------------------------------------------------
@@ -493,7 +548,8 @@ class SimNode(Node):
     def route_state(self) -> str:
         """Return the route's state: waiting, driving, looping or finished."""
         if self._route_start is None:
-            return 'waiting for the camera and a subscriber'
+            return ('waiting for the camera and a subscriber' if self._camera_ready_at is None
+                    else 'waiting for the stack')
         if self.route.looping:
             return 'looping'
         return 'finished' if self._finished else 'driving'

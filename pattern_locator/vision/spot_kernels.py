@@ -847,7 +847,7 @@ def _median_of(values, count):
 @numba.njit(cache=True, nogil=False)
 def paper_noise(source, pts, roomy):
     """
-    The card's white and noise from 3x3 patches at paper points: (white, spread, roomy spread).
+    Measure the white and noise in 3x3 patches at paper points: (white, spread, roomy spread).
 
     ``source`` (h, w, C) uint8; ``pts`` (N, 2) image points at least 2 px
     inside it (rounded to the nearest pixel, half to even as numpy's);

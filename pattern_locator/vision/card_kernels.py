@@ -1369,6 +1369,7 @@ def warm_up() -> float:
     image.flags.writeable = False
     combed_tiles(image, 16)
     component_stats(labels, 2)
+    blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
     faint_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)
     return time.perf_counter() - start

@@ -521,6 +521,8 @@ def _load_kernels() -> None:
     layout = plane_layout(np.array([[-0.01, 0.0], [0.01, 0.0]]), np.full(2, 0.004), 0.02)
     H = np.array([[400.0, 0.0, 24.0], [0.0, -400.0, 24.0], [0.0, 0.0, 1.0]])
     measure_spots(dot_image, None, H, layout, np.arange(2), Paper(np.full(3, 200.0), 1.0, 1.0))
+    card_paper(dot_image, None, H, np.array([[-0.02, -0.02], [0.02, -0.02], [0.02, 0.02],
+                                             [-0.02, 0.02], [0.0, 0.02]]), np.full(5, 0.01))
     # The two only a dot partly covered by an object needs.
     spot_kernels.box3(np.zeros((1, 1, 3), dtype=np.float32))
     spot_kernels.ellipse(np.zeros((1, 2, 2), dtype=np.float32), np.zeros((1, 2)),

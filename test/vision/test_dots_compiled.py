@@ -1,14 +1,18 @@
 """Compiled passes of the dots stage (in card_kernels): numpy's results to the bit, in bounds."""
 
+import subprocess
+import sys
+
 import cv2
 import numba
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
                                         render_scene, RenderOptions)
-from pattern_locator.vision import card_kernels
+from pattern_locator.vision import card_kernels, fit_kernels, spot_kernels
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.detector import Detector
+from pattern_locator.vision.locate import CardLocator
 from pattern_locator.vision.dots import combed
 
 CFG = PatternConfig()
@@ -145,9 +149,13 @@ def test_one_compiled_signature_per_kernel_after_detections():
     frozen = image.copy()
     frozen.flags.writeable = False
     assert detector.detect(frozen, VGA)
+    # And the pose's refinement, in the locator.
+    assert CardLocator(CFG).locate(image, VGA)[0].T_camera_pattern is not None
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
                card_kernels.threshold, card_kernels.faint_components,
-               card_kernels.component_stats]
+               card_kernels.component_stats, card_kernels.blob_covariance,
+               spot_kernels.paper_noise, fit_kernels.fit_homography_points,
+               fit_kernels.refine_pose]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
@@ -168,3 +176,33 @@ def test_component_statistics_are_opencvs():
     labels = np.array([[0, 1], [2, 7]], dtype=np.int32)
     stats, _ = card_kernels.component_stats(labels, 2)
     assert stats[1].tolist() == [1, 0, 1, 1, 1]
+
+
+def test_every_kernel_is_ready_at_import():
+    # A kernel first compiled (or loaded) at a frame costs that frame
+    # seconds: the first frames of a bench, of a node. In a fresh process,
+    # importing the locator must leave nothing for the first location.
+    script = '''
+import numba, numpy as np
+from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.sim.render import card_pose_facing, CardPlacement, DotCardTexture, render_scene, RenderOptions
+from pattern_locator.vision import card_kernels, fit_kernels, spot_kernels
+from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.locate import CardLocator
+def counts():
+    return {(m.__name__, n): len(getattr(m, n).signatures) for m in (card_kernels, fit_kernels, spot_kernels)
+            for n in dir(m) if isinstance(getattr(m, n), numba.core.registry.CPUDispatcher)}
+cfg, cam = PatternConfig(), CameraModel.from_focal(640, 480, 1000.0)
+T = card_pose_facing(2.5, 40.0, 120.0, 10.0, (60.0, -40.0), cam)
+image = render_scene(cam, [CardPlacement(T, DotCardTexture(cfg, cfg.encode(1, 12, 4)))],
+                     RenderOptions(noise_sigma=1.5, background='photo', seed=3)).image
+locator = CardLocator(cfg)
+before = counts()
+assert locator.locate(image, cam)[0].T_camera_pattern is not None
+after = counts()
+print({k: (before[k], after[k]) for k in after if after[k] != before[k]})
+'''
+    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == '{}', f'compiled at the first frame: {result.stdout}'

@@ -12,8 +12,8 @@ from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCard
 from pattern_locator.vision import card_kernels, fit_kernels, spot_kernels
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.detector import Detector
-from pattern_locator.vision.locate import CardLocator
 from pattern_locator.vision.dots import combed
+from pattern_locator.vision.locate import CardLocator
 
 CFG = PatternConfig()
 VGA = CameraModel.from_focal(640, 480, 1000.0)
@@ -185,13 +185,15 @@ def test_every_kernel_is_ready_at_import():
     script = '''
 import numba, numpy as np
 from pattern_locator.card.pattern import PatternConfig
-from pattern_locator.sim.render import card_pose_facing, CardPlacement, DotCardTexture, render_scene, RenderOptions
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
+                                        render_scene, RenderOptions)
 from pattern_locator.vision import card_kernels, fit_kernels, spot_kernels
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.locate import CardLocator
 def counts():
-    return {(m.__name__, n): len(getattr(m, n).signatures) for m in (card_kernels, fit_kernels, spot_kernels)
-            for n in dir(m) if isinstance(getattr(m, n), numba.core.registry.CPUDispatcher)}
+    return {(m.__name__, n): len(getattr(m, n).signatures)
+            for m in (card_kernels, fit_kernels, spot_kernels) for n in dir(m)
+            if isinstance(getattr(m, n), numba.core.registry.CPUDispatcher)}
 cfg, cam = PatternConfig(), CameraModel.from_focal(640, 480, 1000.0)
 T = card_pose_facing(2.5, 40.0, 120.0, 10.0, (60.0, -40.0), cam)
 image = render_scene(cam, [CardPlacement(T, DotCardTexture(cfg, cfg.encode(1, 12, 4)))],

@@ -182,7 +182,7 @@ def test_every_kernel_is_ready_at_import():
     # A kernel first compiled (or loaded) at a frame costs that frame
     # seconds: the first frames of a bench, of a node. In a fresh process,
     # importing the locator must leave nothing for the first location.
-    script = '''
+    script = """
 import numba, numpy as np
 from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
@@ -203,7 +203,7 @@ before = counts()
 assert locator.locate(image, cam)[0].T_camera_pattern is not None
 after = counts()
 print({k: (before[k], after[k]) for k in after if after[k] != before[k]})
-'''
+"""
     result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
                             timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]

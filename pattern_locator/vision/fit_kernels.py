@@ -142,16 +142,10 @@ def _refine(obj, img, p):
                     jrow[3], jrow[4], jrow[5] = x / w, y / w, 1.0 / w
                     jrow[6], jrow[7] = -v * x / w, -v * y / w
                     res = v - img[i, 1]
-                for a in range(8):
-                    Jtr[a] += jrow[a] * res
-                    for b in range(8):
-                        JtJ[a, b] += jrow[a] * jrow[b]
+                _accumulate(JtJ, Jtr, jrow, res)
         improved = False
         for _ in range(8):
-            M = JtJ.copy()
-            for a in range(8):
-                M[a, a] += lam * (JtJ[a, a] + 1e-12)
-            solved, step = _solve(M, Jtr)
+            solved, step = _damped_step(JtJ, Jtr, lam)
             if not solved:
                 return p
             trial = p - step
@@ -179,6 +173,25 @@ def _mul3(A, B):
         for c in range(3):
             C[r, c] = (A[r, 0] * B[0, c] + A[r, 1] * B[1, c]) + A[r, 2] * B[2, c]
     return C
+
+
+@_kernel
+def _accumulate(JtJ, Jtr, jrow, res):
+    """Add one residual's row to the normal equations (J^T J, J^T r)."""
+    n = jrow.shape[0]
+    for a in range(n):
+        Jtr[a] += jrow[a] * res
+        for b in range(n):
+            JtJ[a, b] += jrow[a] * jrow[b]
+
+
+@_kernel
+def _damped_step(JtJ, Jtr, lam):
+    """Levenberg-Marquardt's step for damping ``lam`` (Marquardt's scaling): (ok, step)."""
+    M = JtJ.copy()
+    for a in range(M.shape[0]):
+        M[a, a] += lam * (JtJ[a, a] + 1e-12)
+    return _solve(M, Jtr)
 
 
 @_kernel
@@ -295,16 +308,10 @@ def refine_pose(obj, img, K, R, t):
                 jrow[1] = d0 * rz + d2 * (-rx)
                 jrow[2] = d0 * (-ry) + d1 * rx
                 jrow[3], jrow[4], jrow[5] = d0, d1, d2
-                for a in range(6):
-                    Jtr[a] += jrow[a] * res
-                    for b in range(6):
-                        JtJ[a, b] += jrow[a] * jrow[b]
+                _accumulate(JtJ, Jtr, jrow, res)
         improved = False
         for _ in range(8):
-            M = JtJ.copy()
-            for a in range(6):
-                M[a, a] += lam * (JtJ[a, a] + 1e-12)
-            solved, step = _solve(M, Jtr)
+            solved, step = _damped_step(JtJ, Jtr, lam)
             if not solved:
                 return R, t
             R_trial = _mul3(_rotation(-step[0], -step[1], -step[2]), R)

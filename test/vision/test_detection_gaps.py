@@ -40,6 +40,16 @@ def render(camera, distance, tilt, azimuth, roll, offset, ids, occluders=(), mir
     return result.image, result.truth[0].dot_pixels
 
 
+def segmented(frame):
+    """Render a frame and segment it: the image, its DotImage and the card's centre blob."""
+    image, dots = render(**frame)
+    dot_image = segment(image, DETECTOR.params)
+    blobs = dot_image.blobs
+    centre = int(np.argmin(np.hypot(blobs.u - dots[0, 0], blobs.v - dots[0, 1])))
+    assert math.hypot(blobs.u[centre] - dots[0, 0], blobs.v[centre] - dots[0, 1]) < 2.0
+    return image, dot_image, centre
+
+
 def ids_found(image, camera):
     return [c.ids.as_tuple() for c in DETECTOR.detect(image, camera) if c.ids is not None]
 
@@ -80,11 +90,8 @@ FAR_BUSY = {
 
 def test_far_centre_darker_than_its_noisy_surroundings_say_is_a_candidate():
     frame = FAR_BUSY
-    image, dots = render(**frame)
-    dot_image = segment(image, DETECTOR.params)
+    image, dot_image, centre = segmented(frame)
     blobs = dot_image.blobs
-    centre = int(np.argmin(np.hypot(blobs.u - dots[0, 0], blobs.v - dots[0, 1])))
-    assert math.hypot(blobs.u[centre] - dots[0, 0], blobs.v[centre] - dots[0, 1]) < 2.0
     # The class: by the local noise alone, the centre is not sure ink.
     u, v = blobs.u[[centre]], blobs.v[[centre]]
     white, noise = dot_image.white_at(u, v), dot_image.noise_at(u, v)
@@ -179,10 +186,8 @@ FAR_STEEP = {
 
 def test_far_steep_cards_faint_ring_in_four_directions_is_a_candidate():
     frame = FAR_STEEP
-    image, dots = render(**frame)
-    dot_image = segment(image, DETECTOR.params)
+    image, dot_image, centre = segmented(frame)
     blobs = dot_image.blobs
-    centre = int(np.argmin(np.hypot(blobs.u - dots[0, 0], blobs.v - dots[0, 1])))
     # The class: no ranked candidate there; found through the faint ring only.
     ranked = card_stage.rank_candidates(blobs, CFG, DETECTOR.params,
                                         dot_image.noise_at(blobs.u, blobs.v))

@@ -324,13 +324,14 @@ def test_position_and_drive_from_two_threads(emulator, camera):
     threads = [threading.Thread(target=poll), threading.Thread(target=drive)]
     for th in threads:
         th.start()
-    time.sleep(1.0)
+    # Both threads make progress side by side (ten of each; about half a
+    # second on an idle machine, longer beside a loaded test run).
+    assert wait_until(lambda: len(polls) >= 10 and len(drives) >= 10, 10.0)
     stop.set()
     for th in threads:
         th.join(2.0)
     camera.stop()
     assert errors == []
-    print(f'{len(polls)} position inquiries and {len(drives)} drives in 1 s')
-    assert len(polls) >= 10 and len(drives) >= 10
-    # One field (20 ms) per packet at 50 Hz plus the 9600 baud line.
-    assert sorted(polls)[len(polls) // 2] < 0.1
+    # One field (20 ms) per packet at 50 Hz plus the 9600 baud line: an
+    # inquiry waits for a drive or two, never for a queue of them.
+    assert sorted(polls)[len(polls) // 2] < 0.25

@@ -277,7 +277,9 @@ def test_vanish_and_restore_recovers(emulator, camera):
         camera.position()
     with pytest.raises(ViscaConnectionError):
         camera.drive(0.1, 0.0)
-    assert time.monotonic() - start < 0.05
+    # At once, not after a reply timeout each (0.25 s here); the bound leaves
+    # room for a test process waiting its turn beside a loaded test run.
+    assert time.monotonic() - start < 0.2
     emulator.restore()
     assert wait_until(lambda: camera.ready, 5.0)
     assert camera.transport.stats.reconnects == 1

@@ -27,6 +27,8 @@ image) before calling.
 import numba
 import numpy as np
 
+from .card_kernels import _median
+
 _F32 = np.float32
 
 
@@ -835,16 +837,6 @@ def box3(a):
 
 
 @numba.njit(cache=True, nogil=False)
-def _median_of(values, count):
-    """Median of ``values[:count]`` (the middle one, or the mean of the two), NaN when empty."""
-    if count == 0:
-        return np.nan
-    s = np.sort(values[:count])
-    m = count // 2
-    return s[m] if count % 2 else (s[m - 1] + s[m]) / 2
-
-
-@numba.njit(cache=True, nogil=False)
 def paper_noise(source, pts, roomy):
     """
     Measure the white and noise in 3x3 patches at paper points: (white, spread, roomy spread).
@@ -859,8 +851,8 @@ def paper_noise(source, pts, roomy):
     """
     n = pts.shape[0]
     channels = source.shape[2]
-    centre = np.empty(n, dtype=np.float32)
     white = np.empty(channels, dtype=np.float32)
+    pixels = np.empty(n)
     spread = np.empty(n)
     chosen = np.empty(n)
     patch = np.empty(9)
@@ -871,8 +863,8 @@ def paper_noise(source, pts, roomy):
         ys[i] = int(np.rint(pts[i, 1]))
     for ch in range(channels):
         for i in range(n):
-            centre[i] = source[ys[i], xs[i], ch]
-        white[ch] = _median_of(centre, n)
+            pixels[i] = source[ys[i], xs[i], ch]
+        white[ch] = _median(pixels)
     count = 0
     for i in range(n):
         total = 0.0
@@ -891,4 +883,4 @@ def paper_noise(source, pts, roomy):
         if roomy[i]:
             chosen[count] = spread[i]
             count += 1
-    return white, _median_of(spread, n), _median_of(chosen, count)
+    return white, _median(spread), _median(chosen[:count]) if count else np.nan

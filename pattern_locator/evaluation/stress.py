@@ -339,23 +339,47 @@ def _memory_kb() -> Optional[Tuple[int, int]]:
         return None
 
 
-def exact_memory_accounting() -> None:
-    """
-    Make freed memory leave the process at once, so each frame's peak is its own.
+# glibc's mallopt parameters, and the thresholds (bytes) the benchmark sets.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_EXACT_BYTES = 128 * 1024
+# A long-running process's thresholds: glibc raises the mmap threshold to the
+# largest block freed (a camera frame, in a node), at most 32 MiB, and the
+# trim threshold to twice that.
+_STEADY_MMAP_BYTES = 32 * 1024 * 1024
 
-    glibc raises its mmap threshold after large frees and then keeps big
-    blocks in the heap, where a later frame reuses them without raising
-    the resident high-water mark. A fixed threshold (128 kB) returns every
-    large block to the system when freed. Only the benchmark does this.
-    """
+
+def _libc():
     try:
         import ctypes
 
-        libc = ctypes.CDLL('libc.so.6')
-        libc.mallopt(-3, 128 * 1024)        # M_MMAP_THRESHOLD
-        libc.mallopt(-1, 128 * 1024)        # M_TRIM_THRESHOLD
+        return ctypes.CDLL('libc.so.6')
     except (OSError, AttributeError):
-        pass
+        return None
+
+
+def steady_allocator() -> None:
+    """
+    Give malloc the thresholds a long-running process settles at, for timing.
+
+    A node's allocator soon keeps a frame's blocks in its heap and reuses
+    them; a benchmark process that returned them to the system after each
+    call would charge every frame the page faults of fresh memory (about a
+    millisecond a frame here, for either detector). Both detectors are timed
+    under these settings.
+    """
+    libc = _libc()
+    if libc is not None:
+        libc.mallopt(_M_MMAP_THRESHOLD, _STEADY_MMAP_BYTES)
+        libc.mallopt(_M_TRIM_THRESHOLD, 2 * _STEADY_MMAP_BYTES)
+
+
+def _exact_allocator(libc) -> None:
+    # Every large block comes from and goes back to the system at once, and
+    # the heap's free memory is returned first, so that a call's peak is its
+    # own: glibc would otherwise serve it from blocks already resident.
+    libc.mallopt(_M_MMAP_THRESHOLD, _EXACT_BYTES)
+    libc.mallopt(_M_TRIM_THRESHOLD, _EXACT_BYTES)
+    libc.malloc_trim(0)
 
 
 def peak_extra_mb(run: Callable[[], object]) -> float:
@@ -364,15 +388,24 @@ def peak_extra_mb(run: Callable[[], object]) -> float:
 
     Linux's high-water mark is reset (``/proc/self/clear_refs``) before the
     call and read after it, so native allocations (OpenCV, AprilTag) count.
+    During the call malloc returns large blocks to the system at once (a
+    reused resident block would not raise the mark); after it, malloc has
+    the long-running thresholds of :func:`steady_allocator`.
     """
+    libc = _libc()
     try:
-        with open('/proc/self/clear_refs', 'w') as f:
-            f.write('5')
-    except OSError:
-        return math.nan
-    before = _memory_kb()
-    run()
-    after = _memory_kb()
+        if libc is not None:
+            _exact_allocator(libc)
+        try:
+            with open('/proc/self/clear_refs', 'w') as f:
+                f.write('5')
+        except OSError:
+            return math.nan
+        before = _memory_kb()
+        run()
+        after = _memory_kb()
+    finally:
+        steady_allocator()
     if before is None or after is None:
         return math.nan
     return max(0.0, (after[1] - before[0]) / 1024.0)
@@ -415,7 +448,7 @@ def run_frames(frames: Sequence[Frame], config: PatternConfig, progress: bool = 
     """Render and measure every frame; rows in condition order."""
     from tqdm import tqdm
 
-    exact_memory_accounting()
+    steady_allocator()
     cameras = bench_cameras()
     # One building per condition (its frames' cards and their decoys, a
     # building of a few hundred cards), whatever the conditions run.
@@ -565,7 +598,7 @@ def run_stress(per_camera: int = 10, seed: int = 1, quick: bool = False,
     from ..card.pattern import load_pattern_config
 
     cv2.setNumThreads(1)
-    exact_memory_accounting()
+    steady_allocator()
     config = load_pattern_config()
     n = 1 if quick else per_camera
     if quick:
@@ -592,4 +625,5 @@ def run_stress(per_camera: int = 10, seed: int = 1, quick: bool = False,
 
 
 __all__ = ['CONDITIONS', 'Frame', 'LIGHTS', 'make_frames', 'peak_extra_mb', 'render_frame',
-           'run_frames', 'run_stress', 'stress_map', 'stress_table', 'targets_table']
+           'run_frames', 'run_stress', 'steady_allocator', 'stress_map', 'stress_table',
+           'targets_table']

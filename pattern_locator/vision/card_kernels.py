@@ -1192,50 +1192,126 @@ def combed_tiles(image, tile_rows):
 
 
 @_kernel
-def component_stats(labels, n):
-    """
-    Return OpenCV's connected-component statistics from a label image: (stats, centroids).
+def _root(parent, i):
+    """Root of run ``i`` in the union-find forest ``parent``, compressing the path."""
+    r = i
+    while parent[r] != r:
+        r = parent[r]
+    while parent[i] != r:
+        up = parent[i]
+        parent[i] = r
+        i = up
+    return r
 
-    ``labels`` (H, W int32) holds ``n`` labels, 0 the background. ``stats``
-    (n, 5 int32) is (x, y, width, height, area) per label and ``centroids``
-    (n, 2) the mean pixel (x, y), as ``cv2.connectedComponentsWithStats``
-    gives them (integer sums, so the same to the bit); row 0 (the
-    background) is left zero. OpenCV's statistics pass costs three times
-    its labelling on the decimated image, empty or not; this one pass over
-    the labels costs about one.
+
+@_kernel
+def label_components(mask):
     """
-    h, w = labels.shape
-    m = max(n, 1)
-    stats = np.zeros((m, 5), dtype=np.int32)
-    centroids = np.zeros((m, 2))
-    sx = np.zeros(m, dtype=np.int64)
-    sy = np.zeros(m, dtype=np.int64)
-    area = np.zeros(m, dtype=np.int64)
-    x0 = np.full(m, w, dtype=np.int32)
-    y0 = np.full(m, h, dtype=np.int32)
-    x1 = np.full(m, -1, dtype=np.int32)
-    y1 = np.full(m, -1, dtype=np.int32)
+    Label a mask's 8-connected components: (labels, stats, centroids), as OpenCV's.
+
+    ``mask`` (H, W uint8): nonzero is foreground. The result is that of
+    ``cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, CV_32S,
+    CCL_GRANA)`` to the bit: ``labels`` (H, W int32, 0 the background),
+    ``stats`` (n, 5 int32) as (x, y, width, height, area) and ``centroids``
+    (n, 2) the mean pixel (x, y), the background's row left zero. It labels
+    runs of a row and joins those that touch a run of the row above
+    (union-find), then numbers the components in the order of their first
+    2 x 2 block in scan order, which is Grana's order (its provisional
+    labels come in that order and each component keeps its smallest). One
+    pass over the pixels and one over the runs: a third faster than
+    OpenCV's labelling with our statistics pass, and half its cost with
+    OpenCV's own statistics.
+    """
+    h, w = mask.shape
+    cap = h * ((w + 1) // 2) + 1           # at most one run every two pixels
+    start = np.empty(cap, dtype=np.int32)
+    end = np.empty(cap, dtype=np.int32)
+    parent = np.empty(cap, dtype=np.int32)
+    row_first = np.empty(h + 1, dtype=np.int64)
+    runs = 0
     for y in range(h):
-        for x in range(w):
-            label = labels[y, x]
-            if label > 0 and label < m:
-                area[label] += 1
-                sx[label] += x
-                sy[label] += y
-                x0[label] = min(x0[label], x)
-                x1[label] = max(x1[label], x)
-                y0[label] = min(y0[label], y)
-                y1[label] = max(y1[label], y)
-    for label in range(1, m):
-        if area[label] > 0:
-            stats[label, 0] = x0[label]
-            stats[label, 1] = y0[label]
-            stats[label, 2] = x1[label] - x0[label] + 1
-            stats[label, 3] = y1[label] - y0[label] + 1
-            stats[label, 4] = area[label]
-            centroids[label, 0] = sx[label] / area[label]
-            centroids[label, 1] = sy[label] / area[label]
-    return stats[:n], centroids[:n]
+        row_first[y] = runs
+        x = 0
+        while x < w:
+            if mask[y, x] != 0:
+                start[runs] = x
+                x += 1
+                while x < w and mask[y, x] != 0:
+                    x += 1
+                end[runs] = x - 1
+                parent[runs] = runs
+                runs += 1
+            x += 1
+        if y > 0:
+            # Runs of this row and the row above touch (8-connected) where
+            # they overlap with one pixel to spare; walk both rows once.
+            i, above_end, j = row_first[y - 1], row_first[y], row_first[y]
+            while i < above_end and j < runs:
+                if end[i] + 1 < start[j]:
+                    i += 1
+                elif end[j] + 1 < start[i]:
+                    j += 1
+                else:
+                    a = _root(parent, i)
+                    b = _root(parent, j)
+                    if a < b:
+                        parent[b] = a
+                    elif b < a:
+                        parent[a] = b
+                    if end[i] <= end[j]:
+                        i += 1
+                    else:
+                        j += 1
+    row_first[h] = runs
+    # Each component's first 2 x 2 block in scan order (all foreground in a
+    # block is one component, so no two components share a block).
+    blocks_x = (w + 1) // 2
+    first = np.full(((h + 1) // 2) * blocks_x, -1, dtype=np.int32)
+    for y in range(h):
+        base = (y // 2) * blocks_x
+        for k in range(row_first[y], row_first[y + 1]):
+            r = _root(parent, k)
+            parent[k] = r
+            key = base + start[k] // 2
+            if first[key] < 0:
+                first[key] = r
+    number = np.zeros(max(runs, 1), dtype=np.int32)
+    n = 1
+    for key in range(first.shape[0]):
+        r = first[key]
+        if r >= 0 and number[r] == 0:
+            number[r] = n
+            n += 1
+    labels = np.zeros((h, w), dtype=np.int32)
+    stats = np.zeros((n, 5), dtype=np.int32)
+    centroids = np.zeros((n, 2))
+    sx = np.zeros(n, dtype=np.int64)
+    sy = np.zeros(n, dtype=np.int64)
+    x1 = np.full(n, -1, dtype=np.int32)
+    y1 = np.full(n, -1, dtype=np.int32)
+    for label in range(1, n):
+        stats[label, 0] = w
+        stats[label, 1] = h
+    for y in range(h):
+        for k in range(row_first[y], row_first[y + 1]):
+            label = number[parent[k]]
+            s, e = start[k], end[k]
+            for x in range(s, e + 1):
+                labels[y, x] = label
+            length = e - s + 1
+            stats[label, 4] += length
+            sx[label] += (s + e) * length // 2      # (s + e) * length is even
+            sy[label] += y * length
+            stats[label, 0] = min(stats[label, 0], s)
+            stats[label, 1] = min(stats[label, 1], y)
+            x1[label] = max(x1[label], e)
+            y1[label] = max(y1[label], y)
+    for label in range(1, n):
+        stats[label, 2] = x1[label] - stats[label, 0] + 1
+        stats[label, 3] = y1[label] - stats[label, 1] + 1
+        centroids[label, 0] = sx[label] / stats[label, 4]
+        centroids[label, 1] = sy[label] / stats[label, 4]
+    return labels, stats, centroids
 
 
 @_kernel
@@ -1368,7 +1444,7 @@ def warm_up() -> float:
     image = np.zeros((40, 40, 3), dtype=np.uint8)
     image.flags.writeable = False
     combed_tiles(image, 16)
-    component_stats(labels, 2)
+    label_components(np.zeros((3, 3), dtype=np.uint8))
     blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
     faint_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)

@@ -153,7 +153,7 @@ def test_one_compiled_signature_per_kernel_after_detections():
     assert CardLocator(CFG).locate(image, VGA)[0].T_camera_pattern is not None
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
                card_kernels.threshold, card_kernels.faint_components,
-               card_kernels.component_stats, card_kernels.blob_covariance,
+               card_kernels.label_components, card_kernels.blob_covariance,
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,
                fit_kernels.refine_pose]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
@@ -161,21 +161,25 @@ def test_one_compiled_signature_per_kernel_after_detections():
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
 
 
-def test_component_statistics_are_opencvs():
+def test_component_labels_and_statistics_are_opencvs():
     rng = np.random.default_rng(11)
-    for _ in range(200):
-        h, w = rng.integers(1, 70, size=2)
-        mask = (rng.random((h, w)) < rng.uniform(0.0, 0.8)).astype(np.uint8) * 255
+    masks = [(rng.random(rng.integers(1, 70, size=2)) < rng.uniform(0.0, 0.9)).astype(np.uint8)
+             * 255 for _ in range(300)]
+    # Blobs of many shapes (rings, bars, touching diagonals) on a clutter
+    # image's scale, and the degenerate ones: empty, full, one row, one column.
+    blobs = cv2.GaussianBlur(rng.random((180, 320)), (0, 0), 2.0)
+    masks += [(blobs < np.quantile(blobs, q)).astype(np.uint8) * 255 for q in (0.05, 0.35, 0.7)]
+    masks += [np.zeros((5, 9), np.uint8), np.full((6, 7), 255, np.uint8),
+              np.eye(9, dtype=np.uint8), np.eye(9, dtype=np.uint8)[::-1].copy(),
+              (rng.random((1, 50)) < 0.5).astype(np.uint8), (rng.random((50, 1)) < 0.5).astype(np.uint8)]
+    for mask in masks:
         n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
             mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
-        got_stats, got_centroids = card_kernels.component_stats(labels, n)
+        got_labels, got_stats, got_centroids = card_kernels.label_components(mask)
         assert got_stats.shape == (n, 5) and got_centroids.shape == (n, 2)
+        assert np.array_equal(got_labels, labels)
         assert np.array_equal(got_stats[1:], stats[1:])
         assert np.array_equal(got_centroids[1:], centroids[1:])
-    # Labels beyond the count given are ignored, not written out of bounds.
-    labels = np.array([[0, 1], [2, 7]], dtype=np.int32)
-    stats, _ = card_kernels.component_stats(labels, 2)
-    assert stats[1].tolist() == [1, 0, 1, 1, 1]
 
 
 def test_every_kernel_is_ready_at_import():

@@ -193,7 +193,7 @@ class DotImage:
         darkest = roi if roi.ndim == 2 else _min_channel(np.ascontiguousarray(roi))
         margin = max(_FAINT_RATIO * white, 5.0 * noise / s, 2.0)
         mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
-        _, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        labels, stats, centroids = card_kernels.label_components(mask)
         own = int(labels[min(int(v / s), y1 - 1) - y0, min(int(u / s), x1 - 1) - x0])
         xy, own_area = card_kernels.faint_components(
             stats, centroids, own, float(max_area), int(s), (x0 + 0.5) * s - 0.5 - u,

@@ -1169,21 +1169,29 @@ def combed_tiles(image, tile_rows):
     cols = cols_in // 4 * 4
     pixels = tile_rows * 4
     count = 0
-    t1 = np.zeros(cols // 4, dtype=np.int64)
-    t2 = np.zeros(cols // 4, dtype=np.int64)
+    tiles = cols // 4
+    t1 = np.zeros(tiles, dtype=np.int64)
+    t2 = np.zeros(tiles, dtype=np.int64)
+    # The sampled pixels of five consecutive rows, in a ring: each row is read
+    # once and in order (reading the five rows round each row in turn cost
+    # twice as much, on a frame not yet in the cache).
+    ring = np.empty((5, cols), dtype=np.int64)
+    for q in range(4):
+        for j in range(cols):
+            ring[q, j] = image[q, 16 * j, ch]
     for r0 in range(2, 2 + rows, tile_rows):
         t1[:] = 0
         t2[:] = 0
-        # Row by row (the image's order in memory), into the band's tiles.
         for r in range(r0, r0 + tile_rows):
+            below2 = (r + 2) % 5
             for j in range(cols):
-                c = 16 * j
-                mid = 2 * np.int64(image[r, c, ch])
-                t1[j // 4] += abs(mid - np.int64(image[r - 1, c, ch])
-                                  - np.int64(image[r + 1, c, ch]))
-                t2[j // 4] += abs(mid - np.int64(image[r - 2, c, ch])
-                                  - np.int64(image[r + 2, c, ch]))
-        for t in range(cols // 4):
+                ring[below2, j] = image[r + 2, 16 * j, ch]
+            above2, above1, mid_row, below1 = (r - 2) % 5, (r - 1) % 5, r % 5, (r + 1) % 5
+            for j in range(cols):
+                mid = 2 * ring[mid_row, j]
+                t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
+                t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
+        for t in range(tiles):
             if t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
                 count += 1
                 if count >= 2:

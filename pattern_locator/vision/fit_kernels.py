@@ -336,12 +336,174 @@ def refine_pose(obj, img, K, R, t):
     return R, t
 
 
+@_kernel
+def project_points(R, t, obj, K):
+    """Ideal-image pixels (N, 2) of plane points ``obj`` (N, 3) at the pose (R, t)."""
+    n = obj.shape[0]
+    out = np.empty((n, 2))
+    for i in range(n):
+        x = R[0, 0] * obj[i, 0] + R[0, 1] * obj[i, 1] + R[0, 2] * obj[i, 2] + t[0]
+        y = R[1, 0] * obj[i, 0] + R[1, 1] * obj[i, 1] + R[1, 2] * obj[i, 2] + t[1]
+        z = R[2, 0] * obj[i, 0] + R[2, 1] * obj[i, 1] + R[2, 2] * obj[i, 2] + t[2]
+        out[i, 0] = K[0, 0] * (x / z) + K[0, 1] * (y / z) + K[0, 2]
+        out[i, 1] = K[1, 1] * (y / z) + K[1, 2]
+    return out
+
+
+@_kernel
+def circle_image_centres(R, t, xy, radii, K):
+    """
+    Ideal-image centres (N, 2) of the image ellipses of plane circles at the pose (R, t).
+
+    The image conic's centre is the pole of the line at infinity: with
+    ``H = K [r1 r2 t]`` and the circle's dual conic ``C* = [[c c^T - r^2 I,
+    c], [c^T, 1]]`` (its point conic's inverse times -r^2), the centre is
+    ``H C* h3`` dehomogenised, ``h3`` the third row of H.
+    """
+    H = np.empty((3, 3))
+    for r in range(3):
+        for col in range(3):
+            H[r, col] = K[r, 0] * (R[0, col] if col < 2 else t[0]) \
+                + K[r, 1] * (R[1, col] if col < 2 else t[1]) \
+                + K[r, 2] * (R[2, col] if col < 2 else t[2])
+    n = xy.shape[0]
+    out = np.empty((n, 2))
+    for i in range(n):
+        cx, cy, r2 = xy[i, 0], xy[i, 1], radii[i] * radii[i]
+        v0 = (cx * cx - r2) * H[2, 0] + cx * cy * H[2, 1] + cx * H[2, 2]
+        v1 = cx * cy * H[2, 0] + (cy * cy - r2) * H[2, 1] + cy * H[2, 2]
+        v2 = cx * H[2, 0] + cy * H[2, 1] + H[2, 2]
+        d0 = H[0, 0] * v0 + H[0, 1] * v1 + H[0, 2] * v2
+        d1 = H[1, 0] * v0 + H[1, 1] * v1 + H[1, 2] * v2
+        d2 = H[2, 0] * v0 + H[2, 1] * v1 + H[2, 2] * v2
+        out[i, 0] = d0 / d2
+        out[i, 1] = d1 / d2
+    return out
+
+
+@_kernel
+def pose_jacobian(R, t, obj, K):
+    """
+    d(pixels)/d(camera position, camera rotation about the pattern's axes), (2N, 6).
+
+    The camera at c = -R^T t sees X at p = R (X - c); moving it by dc and
+    turning it by dtheta about the pattern's axes changes p by -R dc + R
+    [X - c]x dtheta (the form of a PoseWithCovariance in the pattern frame).
+    """
+    n = obj.shape[0]
+    c = np.empty(3)
+    for k in range(3):
+        c[k] = -(R[0, k] * t[0] + R[1, k] * t[1] + R[2, k] * t[2])
+    J = np.empty((2 * n, 6))
+    M = np.empty((3, 3))
+    for i in range(n):
+        d0, d1, d2 = obj[i, 0] - c[0], obj[i, 1] - c[1], obj[i, 2] - c[2]
+        x = R[0, 0] * d0 + R[0, 1] * d1 + R[0, 2] * d2
+        y = R[1, 0] * d0 + R[1, 1] * d1 + R[1, 2] * d2
+        z = R[2, 0] * d0 + R[2, 1] * d1 + R[2, 2] * d2
+        # R [d]x, row by row.
+        for r in range(3):
+            M[r, 0] = R[r, 1] * d2 - R[r, 2] * d1
+            M[r, 1] = -R[r, 0] * d2 + R[r, 2] * d0
+            M[r, 2] = R[r, 0] * d1 - R[r, 1] * d0
+        u0, u1, u2 = K[0, 0] / z, K[0, 1] / z, -(K[0, 0] * x + K[0, 1] * y) / (z * z)
+        w1, w2 = K[1, 1] / z, -K[1, 1] * y / (z * z)
+        for k in range(3):
+            J[2 * i, k] = -(u0 * R[0, k] + u1 * R[1, k] + u2 * R[2, k])
+            J[2 * i, 3 + k] = u0 * M[0, k] + u1 * M[1, k] + u2 * M[2, k]
+            J[2 * i + 1, k] = -(w1 * R[1, k] + w2 * R[2, k])
+            J[2 * i + 1, 3 + k] = w1 * M[1, k] + w2 * M[2, k]
+    return J
+
+
+@_kernel
+def point_residuals(R, t, obj, img, K):
+    """Distances (N,) in the ideal image between ``img`` and the projections of ``obj``."""
+    projected = project_points(R, t, obj, K)
+    out = np.empty(obj.shape[0])
+    for i in range(obj.shape[0]):
+        du, dv = projected[i, 0] - img[i, 0], projected[i, 1] - img[i, 1]
+        out[i] = math.sqrt(du * du + dv * dv)
+    return out
+
+
+@_kernel
+def pose_covariance_matrix(R, t, obj, K, sigma):
+    """
+    ``sigma^2 (J^T J)^-1`` (6x6) with J :func:`pose_jacobian`; all inf when J^T J is singular.
+
+    The inverse column by column (:func:`_solve`): numba's inverse would
+    take LAPACK from SciPy, and numpy's costs some 20 us of overhead.
+    """
+    J = pose_jacobian(R, t, obj, K)
+    info = np.zeros((6, 6))
+    for r in range(J.shape[0]):
+        for a in range(6):
+            for b in range(6):
+                info[a, b] += J[r, a] * J[r, b]
+    cov = np.empty((6, 6))
+    unit = np.zeros(6)
+    for k in range(6):
+        unit[:] = 0.0
+        unit[k] = 1.0
+        ok, column = _solve(info, unit)
+        if not ok:
+            return np.full((6, 6), np.inf)
+        for a in range(6):
+            cov[a, k] = sigma * sigma * column[a]
+    return cov
+
+
+@_kernel
+def circle_axis_angle(R, t, K, radius):
+    """
+    Angle (radians, [-pi/2, pi/2)) of the long axis of a centred plane circle's image ellipse.
+
+    The image conic is ``H^-T diag(1, 1, -r^2) H^-1`` with ``H = K [r1 r2
+    t]``; the adjugate stands for the inverse (the conic's scale, det(H)^2,
+    changes neither its axes nor its sign). The long axis is the
+    eigenvector of the quadratic part's smaller eigenvalue (the part made
+    positive definite), 90 degrees from the larger one's at half
+    ``atan2(2b, a - c)``; a circle's image that is a circle gives 0.
+    """
+    H = np.empty((3, 3))
+    for r in range(3):
+        for col in range(3):
+            H[r, col] = K[r, 0] * (R[0, col] if col < 2 else t[0]) \
+                + K[r, 1] * (R[1, col] if col < 2 else t[1]) \
+                + K[r, 2] * (R[2, col] if col < 2 else t[2])
+    # adj[i, j]: the cofactor of H[j, i].
+    adj = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            r0, r1 = (j + 1) % 3, (j + 2) % 3
+            c0, c1 = (i + 1) % 3, (i + 2) % 3
+            adj[i, j] = H[r0, c0] * H[r1, c1] - H[r0, c1] * H[r1, c0]
+    r2 = radius * radius
+    q = np.empty(3)         # Q[0, 0], Q[0, 1], Q[1, 1] of adj^T diag(1, 1, -r^2) adj
+    for k, (i, j) in enumerate(((0, 0), (0, 1), (1, 1))):
+        q[k] = adj[0, i] * adj[0, j] + adj[1, i] * adj[1, j] - r2 * adj[2, i] * adj[2, j]
+    sign = 1.0 if q[0] + q[2] > 0.0 else (-1.0 if q[0] + q[2] < 0.0 else 0.0)
+    a, b, c = sign * q[0], sign * q[1], sign * q[2]
+    if b == 0.0 and a == c:
+        return 0.0
+    angle = 0.5 * math.atan2(2.0 * b, a - c) + 0.5 * math.pi
+    return (angle + 0.5 * math.pi) % math.pi - 0.5 * math.pi
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) the kernels with the argument types the detector uses."""
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, 0.4]])
     fit_homography_points(square, square * 2.0 + 1.0)
     plane = np.column_stack([square, np.zeros(len(square))])
-    refine_pose(plane, square * 100.0, np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0]))
+    K, R, t = np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0])
+    refine_pose(plane, square * 100.0, K, R, t)
+    project_points(R, t, plane, K)
+    circle_image_centres(R, t, square, np.ones(len(square)), K)
+    pose_jacobian(R, t, plane, K)
+    point_residuals(R, t, plane, square, K)
+    pose_covariance_matrix(R, t, plane, K, 1.0)
+    circle_axis_angle(R, t, K, 1.0)
 
 
 warm_up()

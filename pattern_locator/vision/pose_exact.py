@@ -26,7 +26,8 @@ import cv2
 import numpy as np
 
 from .camera import CameraModel
-from .fit_kernels import refine_pose
+from .fit_kernels import (circle_axis_angle, circle_image_centres, point_residuals,
+                          pose_covariance_matrix, project_points, refine_pose)
 from .geometry import Pose
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
@@ -106,10 +107,11 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     obj = _model_points(config)[seen]
     radii = _dot_radii(config)[seen]
     observed = camera.undistort_pixels(points_px[seen])
-    K = camera.K
+    K = _f64(camera.K)
 
     # IPPE's two planar solutions are close to optimal: their residuals tell
-    # them apart, and only the chosen one is corrected and refined.
+    # them apart, and only the chosen one is corrected and refined. (Each
+    # candidate: squared error, R, t, projection.)
     candidates = sorted(_ippe(obj, observed, K), key=lambda sol: sol[0])
     n = len(obj)
     rms = [math.sqrt(c[0] / n) for c in candidates]
@@ -124,21 +126,20 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     best, chosen_by = 0, 'reprojection'
     if prior is not None and len(candidates) > 1 and ambiguity < ambiguity_threshold:
         sigma2 = max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2
-        costs = [c[0] / sigma2 + prior.penalty(Pose.from_rvec(c[1], c[2])) for c in candidates]
+        costs = [c[0] / sigma2 + prior.penalty(Pose(c[1], c[2])) for c in candidates]
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
     # (Each candidate carries its projection, made for its residual.)
-    _, rvec, tvec, projected = candidates[best]
+    _, R, t, projected = candidates[best]
     corrected = observed
     if bias_correction:
         # The offset depends only weakly on the pose: computed from IPPE's
         # pose it leaves a bias far below the noise after the refinement.
-        offset = (ellipse_centres(Pose.from_rvec(rvec, tvec), obj[:, :2], radii, K)
-                  - projected)
-        corrected = observed - offset
-    rvec, tvec = _refine_lm(obj, corrected, K, rvec, tvec)
-    residual = np.linalg.norm(_project(obj, rvec, tvec, K) - corrected, axis=1)
+        corrected = observed - (circle_image_centres(R, t, _f64(obj[:, :2]), radii, K)
+                                - projected)
+    R, t = refine_pose(obj, corrected, K, R, t)
+    residual = point_residuals(R, t, obj, corrected, K)
     # A dot partly hidden by an occluder or merged with a neighbour keeps a
     # centre far off the others' fit: drop it and solve again.
     median = float(np.partition(residual, n // 2)[n // 2])
@@ -149,7 +150,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         return estimate_exact(cleaned, camera, config, prior, pixel_sigma, bias_correction,
                               ambiguity_threshold)
     ss = float(np.sum(residual ** 2))
-    pose = Pose.from_rvec(rvec, tvec)
+    pose = Pose(R, t)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
     return PoseEstimate(
@@ -157,7 +158,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         covariance=pose_covariance(pose, obj, K, sigma),
         reprojection_rms_px=math.sqrt(ss / n),
         ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
-        alternative=Pose.from_rvec(other[1], other[2]) if other is not None else None,
+        alternative=Pose(other[1], other[2]) if other is not None else None,
         n_points=n,
         chosen_by=chosen_by,
     )
@@ -194,31 +195,15 @@ def pose_covariance(T_camera_pattern: Pose, object_points: np.ndarray, K: np.nda
     PoseWithCovariance uses. With the true pose and the true pixel noise this
     is the Cramer-Rao bound of any unbiased estimator.
     """
-    J = _camera_jacobian(T_camera_pattern, object_points, K)
-    info = J.T @ J
-    try:
-        return sigma_px ** 2 * np.linalg.inv(info)
-    except np.linalg.LinAlgError:
-        return np.full((6, 6), np.inf)
+    return pose_covariance_matrix(_f64(T_camera_pattern.R), _f64(T_camera_pattern.t),
+                                  _f64(object_points), _f64(K), float(sigma_px))
 
 
 def ellipse_centres(T_camera_pattern: Pose, centres_xy: np.ndarray, radii: np.ndarray,
                     K: np.ndarray) -> np.ndarray:
     """Ideal-image centres of the image ellipses of plane circles (N, 2)."""
-    H = K @ np.column_stack([T_camera_pattern.R[:, 0], T_camera_pattern.R[:, 1],
-                             T_camera_pattern.t])
-    n = len(radii)
-    cx, cy = centres_xy[:, 0], centres_xy[:, 1]
-    # Dual conic of each circle (inverse of its point conic), mapped by H:
-    # the image conic's centre is the pole of the line at infinity.
-    C = np.zeros((n, 3, 3))
-    C[:, 0, 0] = 1.0
-    C[:, 1, 1] = 1.0
-    C[:, 0, 2] = C[:, 2, 0] = -cx
-    C[:, 1, 2] = C[:, 2, 1] = -cy
-    C[:, 2, 2] = cx ** 2 + cy ** 2 - radii ** 2
-    dual = H[None] @ np.linalg.inv(C) @ H.T[None]
-    return dual[:, :2, 2] / dual[:, 2:3, 2]
+    return circle_image_centres(_f64(T_camera_pattern.R), _f64(T_camera_pattern.t),
+                                _f64(np.asarray(centres_xy)[:, :2]), _f64(radii), _f64(K))
 
 
 def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternConfig
@@ -231,22 +216,12 @@ def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternCon
     psi: angle of the outer ring's image ellipse long axis to the image
     horizontal (ideal image).
     """
-    c = T_camera_pattern.inverse().t
-    distance = float(np.linalg.norm(c))
-    phi = math.degrees(math.acos(float(np.clip(c[2] / distance, -1.0, 1.0))))
+    R, t = _f64(T_camera_pattern.R), _f64(T_camera_pattern.t)
+    c = -(R.T @ t)
+    distance = math.sqrt(float(c @ c))
+    phi = math.degrees(math.acos(min(max(float(c[2]) / distance, -1.0), 1.0)))
     theta = math.degrees(math.atan2(c[0], c[1])) % 360.0
-    H = camera.K @ np.column_stack([T_camera_pattern.R[:, 0], T_camera_pattern.R[:, 1],
-                                    T_camera_pattern.t])
-    radius = config.ring_radii[0]
-    circle = np.diag([1.0, 1.0, -radius ** 2])
-    Hinv = np.linalg.inv(H)
-    Q = Hinv.T @ circle @ Hinv
-    A, B, C = Q[0, 0], 2.0 * Q[0, 1], Q[1, 1]
-    # Long axis: the eigenvector of the quadratic part with the smaller eigenvalue.
-    evals, evecs = np.linalg.eigh(np.array([[A, B / 2.0], [B / 2.0, C]]) * np.sign(A + C))
-    axis = evecs[:, 0]
-    psi = math.degrees(math.atan2(axis[1], axis[0]))
-    psi = (psi + 90.0) % 180.0 - 90.0
+    psi = math.degrees(circle_axis_angle(R, t, _f64(camera.K), float(config.ring_radii[0])))
     return psi, phi, theta, distance
 
 
@@ -262,28 +237,38 @@ def _dot_radii(config: PatternConfig) -> np.ndarray:
     return config.dot_radii()
 
 
+def _f64(a) -> np.ndarray:
+    """Contiguous float64, as the compiled kernels take their arrays (one signature each)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
+    """Return the planar solutions (IPPE's): (squared error, R, t, projection) each."""
+    obj = obj.astype(np.float64)
+    image = observed_px.astype(np.float64).reshape(-1, 1, 2)
     try:
-        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
-            obj.astype(np.float64), observed_px.astype(np.float64).reshape(-1, 1, 2), K,
-            None, flags=cv2.SOLVEPNP_IPPE)
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, image, K, None, flags=cv2.SOLVEPNP_IPPE)
+        found = [(r, t) for r, t in list(zip(rvecs, tvecs))[:n] if np.isfinite(r).all()
+                 and np.isfinite(t).all()]
+        if not found:
+            # OpenCV's IPPE gives NaN on some exact (noise-free) views; the
+            # global SQPnP gives their one solution.
+            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, image, K, None,
+                                                     flags=cv2.SOLVEPNP_SQPNP)
+            found = [(r, t) for r, t in list(zip(rvecs, tvecs))[:n] if np.isfinite(r).all()
+                     and np.isfinite(t).all()]
     except cv2.error as exc:
         raise EstimationError(f'planar PnP failed: {exc.msg if hasattr(exc, "msg") else exc}')
-    if not n:
+    if not found:
         raise EstimationError('planar PnP found no solution (degenerate dot layout)')
     solutions = []
-    for r, t in zip(rvecs, tvecs):
-        r, t = np.asarray(r, float).reshape(3), np.asarray(t, float).reshape(3)
-        projected = _project(obj, r, t, K)
+    for r, t in found:
+        R = cv2.Rodrigues(np.asarray(r, dtype=np.float64).reshape(3, 1))[0]
+        t = np.asarray(t, dtype=np.float64).reshape(3)
+        projected = project_points(R, t, obj, K)
         ss = float(np.sum((projected - observed_px) ** 2))
-        solutions.append((ss, r, t, projected))
+        solutions.append((ss, R, t, projected))
     return solutions
-
-
-def _project(obj: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray) -> np.ndarray:
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float).reshape(3, 1))
-    cam = obj @ R.T + tvec
-    return _pixels(cam, K)
 
 
 def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -291,51 +276,7 @@ def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
 
 
-def _refined_candidate(obj, observed, K, rvec, tvec):
-    rvec, tvec = _refine_lm(obj, observed, K, rvec, tvec)
-    projected = _project(obj, rvec, tvec, K)
-    return float(np.sum((projected - observed) ** 2)), rvec, tvec, projected
-
-
-def _refine_lm(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, rvec: np.ndarray,
-               tvec: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """Levenberg-Marquardt on the reprojection error in the ideal image (compiled)."""
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
-    R, t = refine_pose(np.ascontiguousarray(obj, dtype=np.float64),
-                       np.ascontiguousarray(observed, dtype=np.float64),
-                       np.ascontiguousarray(K, dtype=np.float64), R,
-                       np.asarray(tvec, dtype=np.float64).reshape(3).copy())
-    return _rvec(R), t
-
-
-def _camera_jacobian(T_camera_pattern: Pose, obj: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """
-    d(pixels)/d(camera position, camera rotation about pattern axes), (2N, 6).
-
-    With the camera at c and R = R_camera_pattern, a point X is seen at
-    p = R (X - c). Moving the camera by dc and turning it by dtheta (about the
-    pattern's axes) changes p by -R dc + R [X - c]x dtheta.
-    """
-    R = T_camera_pattern.R
-    c = T_camera_pattern.inverse().t
-    d = obj - c
-    p = d @ R.T
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    # Pixel derivative with respect to the camera-frame point, (N, 2, 3).
-    dpix = np.zeros((len(obj), 2, 3))
-    dpix[:, 0, 0] = K[0, 0] / z
-    dpix[:, 0, 1] = K[0, 1] / z
-    dpix[:, 0, 2] = -(K[0, 0] * x + K[0, 1] * y) / z ** 2
-    dpix[:, 1, 1] = K[1, 1] / z
-    dpix[:, 1, 2] = -K[1, 1] * y / z ** 2
-    cross = np.zeros((len(obj), 3, 3))
-    cross[:, 0, 1], cross[:, 0, 2] = -d[:, 2], d[:, 1]
-    cross[:, 1, 0], cross[:, 1, 2] = d[:, 2], -d[:, 0]
-    cross[:, 2, 0], cross[:, 2, 1] = -d[:, 1], d[:, 0]
-    dp = np.concatenate([np.broadcast_to(-R, (len(obj), 3, 3)), R[None] @ cross], axis=2)
-    return (dpix @ dp).reshape(-1, 6)
-
-
-def _rvec(R: np.ndarray) -> np.ndarray:
-    rvec, _ = cv2.Rodrigues(R)
-    return rvec.reshape(3)
+def _refined_candidate(obj, observed, K, R, t):
+    R, t = refine_pose(obj, observed, K, R, t)
+    projected = project_points(R, t, obj, K)
+    return float(np.sum((projected - observed) ** 2)), R, t, projected

@@ -52,8 +52,9 @@ def test_blob_shape_matches_opencv_moments_and_lapack(blobs):
     assert len(blobs) > 20
     for j in range(len(blobs)):
         cov = blobs.covariance(j)
-        xx, xy, yy = card_kernels.blob_covariance(blobs.labels, blobs.box[j], blobs.label[j],
-                                                  blobs.scale)
+        # As the detector calls it (a Python int label: one compiled signature).
+        xx, xy, yy = card_kernels.blob_covariance(blobs.labels, blobs.box[j],
+                                                  int(blobs.label[j]), blobs.scale)
         assert np.allclose([xx, xy, yy], [cov[0, 0], cov[0, 1], cov[1, 1]], rtol=1e-12,
                            atol=1e-12)
         small, big, ex, ey = card_kernels._eig2(xx, xy, yy)

@@ -155,7 +155,10 @@ def test_one_compiled_signature_per_kernel_after_detections():
                card_kernels.threshold, card_kernels.faint_components,
                card_kernels.label_components, card_kernels.blob_covariance,
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,
-               fit_kernels.refine_pose]
+               fit_kernels.refine_pose, fit_kernels.project_points,
+               fit_kernels.circle_image_centres, fit_kernels.pose_jacobian,
+               fit_kernels.point_residuals, fit_kernels.pose_covariance_matrix,
+               fit_kernels.circle_axis_angle]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
@@ -171,7 +174,8 @@ def test_component_labels_and_statistics_are_opencvs():
     masks += [(blobs < np.quantile(blobs, q)).astype(np.uint8) * 255 for q in (0.05, 0.35, 0.7)]
     masks += [np.zeros((5, 9), np.uint8), np.full((6, 7), 255, np.uint8),
               np.eye(9, dtype=np.uint8), np.eye(9, dtype=np.uint8)[::-1].copy(),
-              (rng.random((1, 50)) < 0.5).astype(np.uint8), (rng.random((50, 1)) < 0.5).astype(np.uint8)]
+              (rng.random((1, 50)) < 0.5).astype(np.uint8),
+              (rng.random((50, 1)) < 0.5).astype(np.uint8)]
     for mask in masks:
         n, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
             mask, 8, cv2.CV_32S, cv2.CCL_GRANA)

@@ -1,7 +1,9 @@
-"""The compiled fits (fit_kernels): OpenCV's least-squares maps, refused when degenerate."""
+"""The compiled fits (fit_kernels): OpenCV's maps, refused when degenerate; the pose's passes."""
 
 import cv2
 import numpy as np
+from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.vision import fit_kernels
 from pattern_locator.vision.fit_kernels import fit_homography_points
 
 
@@ -70,3 +72,81 @@ def test_the_pose_refinement_reaches_opencvs_optimum_or_better():
         # steps stop short, by up to 8 cm along the line of sight at 7.6 m;
         # run on, it comes this way.)
         assert cost(R, t) <= cost(R_cv, t_cv.ravel()) * (1 + 1e-9) + 1e-12
+
+
+def _random_views(rng, count):
+    for _ in range(count):
+        R, _ = cv2.Rodrigues(rng.normal(0.0, 0.6, 3))
+        t = np.array([rng.normal(0, 0.5), rng.normal(0, 0.5), rng.uniform(0.5, 8.0)])
+        K = np.array([[rng.uniform(300, 1500), rng.normal(0, 1), rng.uniform(200, 700)],
+                      [0.0, rng.uniform(300, 1500), rng.uniform(200, 500)], [0.0, 0.0, 1.0]])
+        yield R, t, K
+
+
+def test_pose_kernels_are_their_numpy_definitions():
+    # Projection, the centres of circles' image ellipses (from the inverse of
+    # each circle's conic, as the numpy code had it) and the pose's Jacobian.
+    cfg = PatternConfig()
+    obj, radii = cfg.model_points(), cfg.dot_radii()
+    for R, t, K in _random_views(np.random.default_rng(5), 300):
+        cam = obj @ R.T + t
+        pixels = np.column_stack([K[0, 0] * cam[:, 0] / cam[:, 2] + K[0, 1] * cam[:, 1] / cam[:, 2]
+                                  + K[0, 2], K[1, 1] * cam[:, 1] / cam[:, 2] + K[1, 2]])
+        assert np.allclose(fit_kernels.project_points(R, t, obj, K), pixels, rtol=0, atol=1e-9)
+        img = pixels + 0.5
+        assert np.allclose(fit_kernels.point_residuals(R, t, obj, img, K),
+                           np.hypot(*(pixels - img).T), rtol=0, atol=1e-9)
+        H = K @ np.column_stack([R[:, 0], R[:, 1], t])
+        C = np.zeros((len(obj), 3, 3))
+        C[:, 0, 0] = C[:, 1, 1] = 1.0
+        C[:, 0, 2] = C[:, 2, 0] = -obj[:, 0]
+        C[:, 1, 2] = C[:, 2, 1] = -obj[:, 1]
+        C[:, 2, 2] = obj[:, 0] ** 2 + obj[:, 1] ** 2 - radii ** 2
+        dual = H[None] @ np.linalg.inv(C) @ H.T[None]
+        centres = dual[:, :2, 2] / dual[:, 2:3, 2]
+        got = fit_kernels.circle_image_centres(R, t, np.ascontiguousarray(obj[:, :2]), radii, K)
+        assert np.allclose(got, centres, rtol=0, atol=1e-9)
+        # Jacobian by central differences of the projection, moving the camera
+        # (c = -R^T t) and turning it about the pattern's axes.
+        J = fit_kernels.pose_jacobian(R, t, obj, K)
+        c = -R.T @ t
+        step = 1e-6
+        for k in range(6):
+            moved = []
+            for sign in (1.0, -1.0):
+                dc, dtheta = np.zeros(3), np.zeros(3)
+                (dc if k < 3 else dtheta)[k % 3] = sign * step
+                R2 = R @ cv2.Rodrigues(dtheta)[0].T
+                moved.append(fit_kernels.project_points(R2, -R2 @ (c + dc), obj, K))
+            numeric = ((moved[0] - moved[1]) / (2 * step)).reshape(-1)
+            assert np.allclose(J[:, k], numeric, rtol=1e-5, atol=1e-4 * np.abs(numeric).max())
+        # As numpy's inverse, to the precision of the information matrix
+        # (its condition number reaches 1e9: rotations against metres).
+        cov = fit_kernels.pose_covariance_matrix(R, t, obj, K, 0.3)
+        expected = 0.09 * np.linalg.inv(J.T @ J)
+        assert np.abs(cov - expected).max() <= 1e-6 * np.abs(expected).max()
+
+
+def test_pose_covariance_of_a_degenerate_view_is_infinite():
+    # Every point on one ray: J^T J is singular, the pose unknown.
+    obj = np.zeros((6, 3))
+    cov = fit_kernels.pose_covariance_matrix(np.eye(3), np.array([0.0, 0.0, 2.0]), obj,
+                                             np.diag([500.0, 500.0, 1.0]), 0.3)
+    assert np.all(np.isinf(cov))
+
+
+def test_circle_axis_angle_is_the_long_axis_of_the_image_conic():
+    for R, t, K in _random_views(np.random.default_rng(8), 300):
+        H = K @ np.column_stack([R[:, 0], R[:, 1], t])
+        Hinv = np.linalg.inv(H)
+        Q = Hinv.T @ np.diag([1.0, 1.0, -0.113 ** 2]) @ Hinv
+        quad = Q[:2, :2] * np.sign(Q[0, 0] + Q[1, 1])
+        _, vectors = np.linalg.eigh(quad)
+        long_axis = vectors[:, 0]                  # the smaller eigenvalue's
+        angle = fit_kernels.circle_axis_angle(R, t, K, 0.113)
+        assert -np.pi / 2 <= angle < np.pi / 2
+        assert abs(np.cos(angle) * long_axis[1] - np.sin(angle) * long_axis[0]) < 1e-9
+    # Seen straight on, the ellipse is a circle: no axis, 0.
+    K = np.diag([800.0, 800.0, 1.0])
+    assert fit_kernels.circle_axis_angle(np.diag([1.0, -1.0, -1.0]), np.array([0, 0, 2.0]), K,
+                                         0.113) == 0.0

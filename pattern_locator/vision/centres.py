@@ -40,7 +40,6 @@ import numpy as np
 
 from . import spot_kernels
 from .camera import CameraModel
-from .cards import apply_h, h_jacobian
 from .detector_params import DetectorParams
 from .dots import DotImage
 from .stats import median
@@ -101,10 +100,10 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     most points' neighbourhoods hold a blurred dot's edge, whose slope is
     no noise, so the noise is taken where the image has room.
     """
-    pts = apply_h(H, paper_xy)
+    pts, J, _ = spot_kernels.plane_to_image(np.ascontiguousarray(H, dtype=np.float64),
+                                            np.ascontiguousarray(paper_xy, dtype=np.float64))
     if clearance is not None:
         # Room in pixels: clearance times the map's smaller singular value.
-        J = h_jacobian(H, paper_xy)
         sq = np.einsum('nij,nij->n', J, J)
         det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
         room = np.asarray(clearance) * np.sqrt(np.maximum(
@@ -239,16 +238,13 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     spots = np.ascontiguousarray(spots, dtype=np.int64)
     plane_xy, radii = layout.points[spots], layout.radii[spots]
     n = len(spots)
-    und = apply_h(H, plane_xy)
-    L = h_jacobian(H, plane_xy)                                # (n, 2, 2) px per metre
+    # Where the homography puts the spots, and its local linear map there
+    # (n, 2, 2 pixels per metre).
+    pred, L, probes = spot_kernels.plane_to_image(np.ascontiguousarray(H, dtype=np.float64),
+                                                  np.ascontiguousarray(plane_xy, dtype=np.float64))
     if camera is not None and camera.has_distortion:
         # The lens's local linear map, by differences of one pixel (one call).
-        pred, right, down = camera.distort_pixels(
-            np.vstack([und, und + [1.0, 0.0], und + [0.0, 1.0]])).reshape(3, n, 2)
-        dx, dy = right - pred, down - pred
-        L = np.stack([dx, dy], axis=2) @ L
-    else:
-        pred = und
+        pred, L = spot_kernels.through_lens(camera.distort_pixels(probes), L)
     out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool),
                        np.zeros(n, dtype=bool), np.zeros(n), np.full((n, 3), np.nan), np.zeros(n),
                        np.zeros(n, dtype=bool))
@@ -521,6 +517,7 @@ def _load_kernels() -> None:
     layout = plane_layout(np.array([[-0.01, 0.0], [0.01, 0.0]]), np.full(2, 0.004), 0.02)
     H = np.array([[400.0, 0.0, 24.0], [0.0, -400.0, 24.0], [0.0, 0.0, 1.0]])
     measure_spots(dot_image, None, H, layout, np.arange(2), Paper(np.full(3, 200.0), 1.0, 1.0))
+    spot_kernels.through_lens(np.zeros((6, 2)), np.zeros((2, 2, 2)))
     card_paper(dot_image, None, H, np.array([[-0.02, -0.02], [0.02, -0.02], [0.02, 0.02],
                                              [-0.02, 0.02], [0.0, 0.02]]), np.full(5, 0.01))
     # The two only a dot partly covered by an object needs.

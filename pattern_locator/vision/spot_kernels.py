@@ -130,6 +130,60 @@ def _owned(owner, spot, qx, qy, half, resolution):
 
 
 @numba.njit(cache=True, nogil=False)
+def plane_to_image(H, xy):
+    """
+    Where homography ``H`` maps plane points ``xy`` (N, 2), and its local linear map there.
+
+    Returns the ideal-image points (N, 2), the map's Jacobian (N, 2, 2,
+    pixels per metre) and the points with a pixel added along x and along y
+    (3N, 2: the points, then those), the probes of the lens's local map.
+    """
+    n = xy.shape[0]
+    pts = np.empty((n, 2))
+    J = np.empty((n, 2, 2))
+    probes = np.empty((3 * n, 2))
+    for i in range(n):
+        x, y = xy[i, 0], xy[i, 1]
+        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+        u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
+        v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+        pts[i, 0], pts[i, 1] = u, v
+        J[i, 0, 0] = (H[0, 0] - u * H[2, 0]) / w
+        J[i, 0, 1] = (H[0, 1] - u * H[2, 1]) / w
+        J[i, 1, 0] = (H[1, 0] - v * H[2, 0]) / w
+        J[i, 1, 1] = (H[1, 1] - v * H[2, 1]) / w
+        probes[i, 0], probes[i, 1] = u, v
+        probes[n + i, 0], probes[n + i, 1] = u + 1.0, v
+        probes[2 * n + i, 0], probes[2 * n + i, 1] = u, v + 1.0
+    return pts, J, probes
+
+
+@numba.njit(cache=True, nogil=False)
+def through_lens(distorted, J):
+    """
+    Compose the lens's local linear map with ``J`` (N, 2, 2).
+
+    ``distorted`` (3N, 2) is the lens's image of :func:`plane_to_image`'s
+    probes: the points, and a pixel further along x and along y, whose
+    differences are the lens's map by differences of one pixel. Returns
+    the distorted points (N, 2) and the composed map.
+    """
+    n = J.shape[0]
+    pts = np.empty((n, 2))
+    out = np.empty((n, 2, 2))
+    for i in range(n):
+        pts[i, 0], pts[i, 1] = distorted[i, 0], distorted[i, 1]
+        dx0 = distorted[n + i, 0] - distorted[i, 0]
+        dx1 = distorted[n + i, 1] - distorted[i, 1]
+        dy0 = distorted[2 * n + i, 0] - distorted[i, 0]
+        dy1 = distorted[2 * n + i, 1] - distorted[i, 1]
+        for c in range(2):
+            out[i, 0, c] = dx0 * J[i, 0, c] + dy0 * J[i, 1, c]
+            out[i, 1, c] = dx1 * J[i, 0, c] + dy1 * J[i, 1, c]
+    return pts, out
+
+
+@numba.njit(cache=True, nogil=False)
 def spot_shapes(L, radii, margin, predicted, largest):
     """
     Each spot's image ellipse from the local linear map ``L`` (N, 2, 2, pixels per metre).

@@ -129,7 +129,10 @@ def _owned(owner, spot, qx, qy, half, resolution):
     return owner[int(row), int(col)] == spot
 
 
-@numba.njit(cache=True, nogil=False)
+# numpy's arithmetic: a degenerate homography (a point on its line at
+# infinity) gives inf or NaN, which the callers' checks refuse, not an
+# exception.
+@numba.njit(cache=True, nogil=False, error_model='numpy')
 def plane_to_image(H, xy):
     """
     Where homography ``H`` maps plane points ``xy`` (N, 2), and its local linear map there.
@@ -158,7 +161,7 @@ def plane_to_image(H, xy):
     return pts, J, probes
 
 
-@numba.njit(cache=True, nogil=False)
+@numba.njit(cache=True, nogil=False, error_model='numpy')
 def through_lens(distorted, J):
     """
     Compose the lens's local linear map with ``J`` (N, 2, 2).

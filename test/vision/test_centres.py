@@ -57,6 +57,21 @@ def test_a_homography_a_pixel_off_still_gives_the_centres():
     assert np.max(np.linalg.norm(spots.points - ellipse_pixels(T), axis=1)) < 0.2
 
 
+def test_a_degenerate_homography_measures_nothing_and_raises_nothing():
+    T = card_pose_facing(2.0, 20.0, 0.0, 0.0, (0.0, 0.0), VGA)
+    result = render_scene(VGA, [CardPlacement(T, DotCardTexture(CFG, CFG.encode(2, 17, 3)))],
+                          RenderOptions(seed=5))
+    dot_image = segment(result.image, DetectorParams())
+    good = true_homography(T)
+    paper = card_paper(dot_image, VGA, good, PAPER_XY)
+    # Every plane point on the map's line at infinity, or no map at all.
+    for H in (np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]), np.zeros((3, 3)),
+              np.full((3, 3), np.nan)):
+        spots = measure_spots(dot_image, VGA, H, LAYOUT, np.arange(CFG.n_dots), paper)
+        assert not np.any(spots.valid)
+        assert card_paper(dot_image, VGA, H, PAPER_XY) is None
+
+
 def test_paper_white_and_noise():
     T = card_pose_facing(2.0, 20.0, 0.0, 0.0, (0.0, 0.0), VGA)
     _, result, paper = measure(T, noise_sigma=4.0, seed=3)

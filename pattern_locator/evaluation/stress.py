@@ -349,10 +349,13 @@ _STEADY_MMAP_BYTES = 32 * 1024 * 1024
 
 
 def _libc():
+    """Return glibc (its mallopt and malloc_trim), or None for another C library."""
     try:
         import ctypes
 
-        return ctypes.CDLL('libc.so.6')
+        libc = ctypes.CDLL('libc.so.6')
+        libc.mallopt, libc.malloc_trim      # both, or neither is used
+        return libc
     except (OSError, AttributeError):
         return None
 

@@ -1200,6 +1200,26 @@ def combed_tiles(image, tile_rows):
 
 
 @_kernel
+def darkest_in(image, x0, y0, x1, y1):
+    """
+    Return the darkest channel (H, W uint8) of a BGR image's window [x0, x1) x [y0, y1).
+
+    One pass from the image itself: the window of a full image is not
+    contiguous, and OpenCV's erosion along the interleaved rows needed a
+    contiguous copy first and a strided slice after (the same minimum).
+    The window is clipped to the image.
+    """
+    h, w = image.shape[0], image.shape[1]
+    x0, y0 = min(max(x0, 0), w), min(max(y0, 0), h)
+    x1, y1 = min(max(x1, x0), w), min(max(y1, y0), h)
+    out = np.empty((y1 - y0, x1 - x0), dtype=np.uint8)
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            out[y - y0, x - x0] = min(image[y, x, 0], image[y, x, 1], image[y, x, 2])
+    return out
+
+
+@_kernel
 def _root(parent, i):
     """Root of run ``i`` in the union-find forest ``parent``, compressing the path."""
     r = i
@@ -1452,6 +1472,7 @@ def warm_up() -> float:
     image = np.zeros((40, 40, 3), dtype=np.uint8)
     image.flags.writeable = False
     combed_tiles(image, 16)
+    darkest_in(image, 0, 0, 4, 4)
     label_components(np.zeros((3, 3), dtype=np.uint8))
     blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)

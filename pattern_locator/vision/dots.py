@@ -189,8 +189,7 @@ class DotImage:
             return none
         if white < self.params.min_white:
             return none
-        roi = self.small[y0:y1, x0:x1]
-        darkest = roi if roi.ndim == 2 else _min_channel(np.ascontiguousarray(roi))
+        darkest = _darkest_in(self.small, x0, y0, x1, y1)
         margin = max(_FAINT_RATIO * white, 5.0 * noise / s, 2.0)
         mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
         labels, stats, centroids = card_kernels.label_components(mask)
@@ -204,8 +203,7 @@ class DotImage:
         """Segment the window [x0, x1) x [y0, y1) again at full resolution."""
         h, w = self.image.shape[:2]
         x0, y0, x1, y1 = max(0, x0), max(0, y0), min(w, x1), min(h, y1)
-        roi = self.image[y0:y1, x0:x1]
-        darkest = roi if self.grey_only else _min_channel(np.ascontiguousarray(roi))
+        darkest = _darkest_in(self.image, x0, y0, x1, y1)
         mask = cv2.compare(darkest, self._threshold_in(x0, y0, x1, y1), cv2.CMP_LT)
         # Components cut by the window's edge are dropped: not whole dots.
         return _components(mask, 1, (x0, y0), self.params.max_dot_area_fraction * h * w)
@@ -301,6 +299,16 @@ def _components(mask: np.ndarray, scale: int, origin: Tuple[int, int],
     s = float(scale)
     return Blobs(u, v, stats[idx, cv2.CC_STAT_AREA].astype(float) * s * s, stats[idx, :4],
                  idx.astype(np.int32), labels, scale, origin)
+
+
+def _darkest_in(image: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+    """Darkest channel of the window [x0, x1) x [y0, y1) of a grey or BGR image."""
+    if image.ndim == 2:
+        return image[y0:y1, x0:x1]
+    # Read-only, as a ROS image's buffer is: one compiled signature.
+    view = image.view()
+    view.flags.writeable = False
+    return card_kernels.darkest_in(view, x0, y0, x1, y1)
 
 
 def _min_channel(image: np.ndarray) -> np.ndarray:

@@ -154,6 +154,7 @@ def test_one_compiled_signature_per_kernel_after_detections():
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
                card_kernels.threshold, card_kernels.faint_components,
                card_kernels.label_components, card_kernels.blob_covariance,
+               card_kernels.darkest_in,
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,
                fit_kernels.refine_pose, fit_kernels.project_points,
                fit_kernels.circle_image_centres, fit_kernels.pose_jacobian,
@@ -184,6 +185,18 @@ def test_component_labels_and_statistics_are_opencvs():
         assert np.array_equal(got_labels, labels)
         assert np.array_equal(got_stats[1:], stats[1:])
         assert np.array_equal(got_centroids[1:], centroids[1:])
+
+
+def test_darkest_channel_of_a_window_is_numpys_minimum_clipped_to_the_image():
+    rng = np.random.default_rng(12)
+    image = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    image.flags.writeable = False
+    for x0, y0, x1, y1 in [(0, 0, 53, 37), (5, 7, 20, 30), (-4, -3, 10, 8), (40, 30, 99, 99),
+                           (10, 10, 10, 20), (60, 40, 70, 50)]:
+        got = card_kernels.darkest_in(image, x0, y0, x1, y1)
+        cx0, cy0 = min(max(x0, 0), 53), min(max(y0, 0), 37)
+        cx1, cy1 = min(max(x1, cx0), 53), min(max(y1, cy0), 37)
+        assert np.array_equal(got, image[cy0:cy1, cx0:cx1].min(axis=2))
 
 
 def test_every_kernel_is_ready_at_import():

@@ -33,6 +33,9 @@ from ..errors import ImageError
 _HIGHPASS_PER_SIGMA = 0.75
 # A far card's pale ring dots: darker than the paper by this fraction of it.
 _FAINT_RATIO = 0.12
+# Windows up to this many pixels take their darkest channel in one compiled
+# pass (about 4x faster at 20 x 20, as fast at 100 x 100, slower beyond).
+_COMPILED_DARKEST_PIXELS = 10000
 
 
 @dataclass(frozen=True)
@@ -305,6 +308,9 @@ def _darkest_in(image: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.nda
     """Darkest channel of the window [x0, x1) x [y0, y1) of a grey or BGR image."""
     if image.ndim == 2:
         return image[y0:y1, x0:x1]
+    if (x1 - x0) * (y1 - y0) > _COMPILED_DARKEST_PIXELS:
+        # OpenCV's vectorised erosion wins on big windows despite the copy.
+        return _min_channel(np.ascontiguousarray(image[y0:y1, x0:x1]))
     # Read-only, as a ROS image's buffer is: one compiled signature.
     view = image.view()
     view.flags.writeable = False

@@ -37,6 +37,7 @@ hidden by an object is completed only when exactly one mapped code fits.
 """
 
 from dataclasses import dataclass, field, replace
+import functools
 import math
 import re
 import time
@@ -348,6 +349,7 @@ _EXACT_BYTES = 128 * 1024
 _STEADY_MMAP_BYTES = 32 * 1024 * 1024
 
 
+@functools.lru_cache(maxsize=1)
 def _libc():
     """Return glibc (its mallopt and malloc_trim), or None for another C library."""
     try:

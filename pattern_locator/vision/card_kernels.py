@@ -373,12 +373,16 @@ def _map_point(H, x, y):
 
 
 @_kernel
+def _h_jacobian(H, u, v, w):
+    """Return the local linear map (j00, j01, j10, j11; px per metre) where H gives (u, v)."""
+    return ((H[0, 0] - u * H[2, 0]) / w, (H[0, 1] - u * H[2, 1]) / w,
+            (H[1, 0] - v * H[2, 0]) / w, (H[1, 1] - v * H[2, 1]) / w)
+
+
+@_kernel
 def _local_scale(H, u, v, w):
     """Image scale (pixels per metre, geometric mean of the axes) where the map gives (u, v)."""
-    j00 = (H[0, 0] - u * H[2, 0]) / w
-    j01 = (H[0, 1] - u * H[2, 1]) / w
-    j10 = (H[1, 0] - v * H[2, 0]) / w
-    j11 = (H[1, 1] - v * H[2, 1]) / w
+    j00, j01, j10, j11 = _h_jacobian(H, u, v, w)
     return math.sqrt(abs(j00 * j11 - j01 * j10))
 
 

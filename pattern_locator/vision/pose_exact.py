@@ -178,7 +178,8 @@ def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: Ca
     seen = ~np.isnan(points_px).any(axis=1)
     obj = _model_points(config)[seen]
     observed = camera.undistort_pixels(points_px[seen])
-    residual = np.linalg.norm(_pixels(T_camera_pattern.apply(obj), camera.K) - observed, axis=1)
+    residual = point_residuals(_f64(T_camera_pattern.R), _f64(T_camera_pattern.t), obj,
+                               observed, _f64(camera.K))
     n = len(obj)
     sigma = max(math.sqrt(float(np.sum(residual ** 2)) / max(2 * n - 6, 1)),
                 pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
@@ -269,11 +270,6 @@ def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
         ss = float(np.sum((projected - observed_px) ** 2))
         solutions.append((ss, R, t, projected))
     return solutions
-
-
-def _pixels(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
-    x, y = cam[:, 0] / cam[:, 2], cam[:, 1] / cam[:, 2]
-    return np.column_stack([K[0, 0] * x + K[0, 1] * y + K[0, 2], K[1, 1] * y + K[1, 2]])
 
 
 def _refined_candidate(obj, observed, K, R, t):

@@ -27,7 +27,7 @@ image) before calling.
 import numba
 import numpy as np
 
-from .card_kernels import _median
+from .card_kernels import _h_jacobian, _map_point, _median
 
 _F32 = np.float32
 
@@ -146,15 +146,9 @@ def plane_to_image(H, xy):
     J = np.empty((n, 2, 2))
     probes = np.empty((3 * n, 2))
     for i in range(n):
-        x, y = xy[i, 0], xy[i, 1]
-        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-        u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
-        v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+        u, v, w = _map_point(H, xy[i, 0], xy[i, 1])
         pts[i, 0], pts[i, 1] = u, v
-        J[i, 0, 0] = (H[0, 0] - u * H[2, 0]) / w
-        J[i, 0, 1] = (H[0, 1] - u * H[2, 1]) / w
-        J[i, 1, 0] = (H[1, 0] - v * H[2, 0]) / w
-        J[i, 1, 1] = (H[1, 1] - v * H[2, 1]) / w
+        J[i, 0, 0], J[i, 0, 1], J[i, 1, 0], J[i, 1, 1] = _h_jacobian(H, u, v, w)
         probes[i, 0], probes[i, 1] = u, v
         probes[n + i, 0], probes[n + i, 1] = u + 1.0, v
         probes[2 * n + i, 0], probes[2 * n + i, 1] = u, v + 1.0

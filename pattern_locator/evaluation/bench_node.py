@@ -5,9 +5,11 @@ A real ``locator`` process receives rendered images of the shipped building
 (with their camera_info) from this process, which measures, per resolution:
 the sustained throughput (poses per second while images arrive at a fixed
 rate), the latency from publishing an image to receiving its
-``/robot_location`` (median, p95), and, in the same run and on the same
-images, the core's own time per frame (``RobotLocalizer.process`` in this
-process): the difference is the node's overhead (conversion, DDS, threads).
+``/robot_location``, and, in the same run and on the same images, the
+core's own time per frame (``RobotLocalizer.process`` in this process): the
+difference is the node's overhead (conversion, DDS, threads). A first table
+compares medians; a second gives each series' tail (mean, p99, max; the
+node's own time as its diagnostics report it: median, p95, max).
 """
 
 import math
@@ -20,6 +22,7 @@ from typing import Dict, List
 import cv2
 import numpy as np
 
+from .bench import time_stats
 from ..card.pattern import load_pattern_config
 from ..localization.building import load_building
 from ..localization.head import HeadGeometry
@@ -47,9 +50,10 @@ def _frames(camera: CameraModel, n: int) -> List[np.ndarray]:
     return frames
 
 
-def _core_ms(camera: CameraModel, frames: List[np.ndarray], rate_hz: float = 0.0) -> float:
+def _core_ms(camera: CameraModel, frames: List[np.ndarray], rate_hz: float = 0.0
+             ) -> List[float]:
     """
-    Return the core's median time per frame, back to back or paced at ``rate_hz``.
+    Return the core's time per frame (ms), back to back or paced at ``rate_hz``.
 
     Paced like the node's input, each frame starts with caches gone cold and
     the CPU clocked down: that is the core time the node is measured against.
@@ -67,7 +71,7 @@ def _core_ms(camera: CameraModel, frames: List[np.ndarray], rate_hz: float = 0.0
         start = time.perf_counter()
         localizer.process(image, camera, 0.0, math.radians(TILT_DEG))
         times.append((time.perf_counter() - start) * 1000.0)
-    return float(np.median(times))
+    return times
 
 
 def _run_node_bench(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> Dict:
@@ -153,9 +157,46 @@ def _measure(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> D
     return {
         'sent': len(sent), 'located': len(latencies), 'node': counts,
         'fps': len(latencies) / duration if duration else math.nan,
+        'latencies_ms': latencies,
         'median_ms': float(np.median(latencies)) if latencies else math.nan,
         'p95_ms': float(np.percentile(latencies, 95)) if latencies else math.nan,
     }
+
+
+def _node_ms(counts: Dict[str, str], statistic: str) -> float:
+    """Return one of the node's own timings (``median``, ``p95``, ``max``) from its diagnostics."""
+    try:
+        return float(counts[f'in_node_ms_{statistic}'])
+    except (KeyError, ValueError):
+        return math.nan
+
+
+def tail_table(rows: Dict[str, Dict[str, object]]) -> str:
+    """
+    Each series' median, mean, p95, p99 and max (ms), per resolution.
+
+    ``rows`` maps a resolution to its series: ``tight``, ``paced`` and
+    ``latency`` (lists of ms) and ``node`` (the node's diagnostics values,
+    which keep its own time as median, p95 and max: its other columns
+    read ``-``).
+    """
+    def cell(value: float) -> str:
+        return f'{value:>8.2f}' if math.isfinite(value) else f'{"-":>8}'
+
+    lines = [f'{"resolution, series":<26}{"median":>8}{"mean":>8}{"p95":>8}{"p99":>8}{"max":>8}']
+    for size, row in rows.items():
+        for label, key in (('core tight', 'tight'), ('core paced', 'paced'),
+                           ('in the node', 'node'), ('latency', 'latency')):
+            if key == 'node':
+                values = (_node_ms(row['node'], 'median'), math.nan,
+                          _node_ms(row['node'], 'p95'), math.nan, _node_ms(row['node'], 'max'))
+            else:
+                series = row[key]
+                median, mean, p99, largest = time_stats(series)
+                p95 = float(np.percentile(series, 95)) if len(series) else math.nan
+                values = (median, mean, p95, p99, largest)
+            lines.append(f'{f"{size} {label}":<26}' + ''.join(cell(v) for v in values))
+    return '\n'.join(lines)
 
 
 def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
@@ -165,14 +206,18 @@ def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
           f'{rate_hz:g} Hz to a locator process on this machine')
     print(f'{"resolution":<12}{"core tight":>11}{"core ms":>9}{"node ms":>9}{"latency med":>13}'
           f'{"p95":>8}{"DDS":>7}{"node - core":>13}{"located":>9}{"fps":>7}')
+    tails: Dict[str, Dict[str, object]] = {}
     for camera in (CameraModel.from_fov(640, 480, 60.0), CameraModel.from_fov(1280, 720, 60.0)):
         frames = _frames(camera, frames_per_size + 3)
-        tight = _core_ms(camera, frames)
-        core = _core_ms(camera, frames, rate_hz)
+        tight_times = _core_ms(camera, frames)
+        paced_times = _core_ms(camera, frames, rate_hz)
         result = _run_node_bench(camera, frames, rate_hz)
-        node_ms = result['node'].get('in_node_ms_median')
-        node = float(node_ms) if node_ms is not None else math.nan
-        print(f'{f"{camera.width}x{camera.height}":<12}{tight:>11.2f}{core:>9.2f}{node:>9.2f}'
+        tight, core = float(np.median(tight_times)), float(np.median(paced_times))
+        node = _node_ms(result['node'], 'median')
+        size = f'{camera.width}x{camera.height}'
+        tails[size] = {'tight': tight_times, 'paced': paced_times,
+                       'latency': result['latencies_ms'], 'node': result['node']}
+        print(f'{size:<12}{tight:>11.2f}{core:>9.2f}{node:>9.2f}'
               f'{result["median_ms"]:>13.2f}{result["p95_ms"]:>8.2f}'
               f'{result["median_ms"] - node:>7.2f}{node - core:>13.2f}'
               f'{f"{result["located"]}/{result["sent"]}":>9}{result["fps"]:>7.1f}')
@@ -187,4 +232,7 @@ def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
           'to its worker, publishing); '
           'fps: poses per second '
           'while images arrive at the rate above (the node drops frames it cannot keep up with)')
+    print('\nThe same series with their tails (ms); the node reports median, p95 and max of '
+          'its recent frames (its diagnostics), so its mean and p99 are not known here:')
+    print(tail_table(tails))
     return 0

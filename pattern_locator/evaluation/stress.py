@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 
 from .baselines import AprilTagLocator, tag_card_bitmap
-from .bench import bench_cameras
+from .bench import bench_cameras, time_stats
 from ..card.pattern import Code, Ids, PatternConfig
 from ..sim.render import (_in_polygon, BitmapCardTexture, card_pose_facing, CardPlacement,
                           DotCardTexture, MirroredTexture, Occluder, render_scene, RenderOptions)
@@ -481,15 +481,6 @@ def run_frames(frames: Sequence[Frame], config: PatternConfig, progress: bool = 
 
 # Tables -----------------------------------------------------------------------------
 
-def _stats(values: Sequence[float]) -> Tuple[float, float, float, float]:
-    """Median, mean, p99 and max of the finite values (NaN when none)."""
-    v = np.asarray([x for x in values if not math.isnan(x)], dtype=float)
-    if v.size == 0:
-        return (math.nan,) * 4
-    return (float(np.median(v)), float(np.mean(v)), float(np.percentile(v, 99)),
-            float(np.max(v)))
-
-
 def _rate(results: Sequence[Result], frames: Sequence[Frame]) -> float:
     expected = [r for r, f in zip(results, frames) if f.expected]
     if not expected:
@@ -518,8 +509,8 @@ def stress_table(rows: Dict[str, Row]) -> str:
             every.frames += row.frames
             every.dots += row.dots
             every.april += row.april
-        ours = _stats([r.time_ms for r in row.dots])
-        theirs = _stats([r.time_ms for r in row.april])
+        ours = time_stats([r.time_ms for r in row.dots])
+        theirs = time_stats([r.time_ms for r in row.april])
         ratios = [a / b if b > 0 else math.nan for a, b in zip(ours, theirs)]
         lines.append(
             f'{row.condition:<20}{len(row.frames):>4} | {_num(_rate(row.dots, row.frames), 1, 6)}'
@@ -563,7 +554,7 @@ def targets_table(rows: Dict[str, Row]) -> str:
     add('0 wrong ids in every condition', f'{wrong}', wrong == 0)
     ours = [r.time_ms for row in rows.values() for r in row.dots]
     theirs = [r.time_ms for row in rows.values() for r in row.april]
-    a, b = _stats(ours), _stats(theirs)
+    a, b = time_stats(ours), time_stats(theirs)
     for name, i, limit in (('median', 0, 0.25), ('mean', 1, 0.35), ('p99', 2, 0.5),
                            ('max', 3, 1.0)):
         ratio = a[i] / b[i] if b[i] > 0 else math.nan

@@ -70,3 +70,19 @@ def test_plots_of_each_run_kind_have_their_own_files(results, tmp_path):
     assert names == ['bench_errors.png', 'bench_quick_errors.png', 'bench_quick_times.png',
                      'bench_times.png']
     assert all(p.stat().st_size > 10_000 for p in tmp_path.iterdir())
+
+
+def test_node_bench_tail_table_gives_every_series_its_tail():
+    from pattern_locator.evaluation.bench_node import tail_table
+    times = [float(v) for v in range(1, 101)]
+    text = tail_table({'640x480': {
+        'tight': times, 'paced': [2 * t for t in times], 'latency': [],
+        'node': {'in_node_ms_median': '3.25', 'in_node_ms_p95': '4.50',
+                 'in_node_ms_max': '9.75', 'in_node_ms_mean': 'not reported'}}})
+    rows = {line[:26].strip(): line[26:].split() for line in text.splitlines()[1:]}
+    assert rows['640x480 core tight'] == ['50.50', '50.50', '95.05', '99.01', '100.00']
+    assert rows['640x480 core paced'][-1] == '200.00'
+    # The node keeps median, p95 and max only; no mean or p99 is made up.
+    assert rows['640x480 in the node'] == ['3.25', '-', '4.50', '-', '9.75']
+    # No pose came back: nothing to report, and no error.
+    assert rows['640x480 latency'] == ['-'] * 5

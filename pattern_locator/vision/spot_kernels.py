@@ -303,6 +303,8 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     spread = np.empty((k_count, 3))
     half32, resolution32 = _F32(half), _F32(resolution)
     off = (scale - 1) / 2.0
+    plane_x = np.empty((size, size), dtype=np.float32)
+    plane_y = np.empty((size, size), dtype=np.float32)
     for k in range(k_count):
         i = index[k]
         bx, by = base[k, 0], base[k, 1]
@@ -330,17 +332,25 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
                     p = source[vc, uc, ch]
                     pixels[k, y, x, ch] = p
                     darkest = min(darkest, p)
-                seen = u >= 0 and u < w and v >= 0 and v < h
+                seen = (u >= 0) & (u < w) & (v >= 0) & (v < h)
                 in_image[k, y, x] = seen
                 r = max(clear - _F32(darkest), _F32(0.0))
                 raw[k, y, x] = r if seen else _F32(0.0)
                 qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
-                mine = _owned(owner, spots[i], qx, qy, half32, resolution32)
-                card = (abs(qx) < room_x and abs(qy) < room_y) \
-                    or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0
-                on_card[k, y, x] = card
-                cell[k, y, x] = seen and mine and card
-                weight[k, y, x] = r if seen and mine and card else _F32(0.0)
+                plane_x[y, x] = qx
+                plane_y[y, x] = qy
+                on_card[k, y, x] = ((abs(qx) < room_x) & (abs(qy) < room_y)) \
+                    | (_ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0)
+        # The spot's share of the plane in a loop of its own: its raster
+        # look-up kept the loop above from being compiled to vector
+        # instructions, which made it twice as slow.
+        spot = spots[i]
+        for y in range(size):
+            for x in range(size):
+                mine = in_image[k, y, x] and on_card[k, y, x] and _owned(
+                    owner, spot, plane_x[y, x], plane_y[y, x], half32, resolution32)
+                cell[k, y, x] = mine
+                weight[k, y, x] = raw[k, y, x] if mine else _F32(0.0)
         # The centroid twice, in the window round the latest centre.
         c0, c1 = pred[k, 0], pred[k, 1]
         for _ in range(2):
@@ -467,6 +477,8 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
     region = np.empty((size, size), dtype=np.bool_)
     stack = np.empty(size * size, dtype=np.int64)
     rows = np.empty((size, size), dtype=np.float32)
+    plane_x = np.empty((size, size), dtype=np.float32)
+    plane_y = np.empty((size, size), dtype=np.float32)
     tight = np.empty(2)
     off = (scale - 1) / 2.0
     for k in range(k_count):
@@ -483,14 +495,19 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
         ax0, ay0 = _F32(c0), _F32(c1)
         qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
         threshold = _F32(0.25) * max(top[k], _F32(1e-6))
+        # Plane positions first, the raster look-ups after (as first_pass).
         for y in range(size):
             for x in range(size):
-                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
-                m = _owned(owner, spots[i], qx, qy, half32, resolution32)
+                plane_x[y, x], plane_y[y, x] = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+        spot = spots[i]
+        for y in range(size):
+            for x in range(size):
+                m = _owned(owner, spot, plane_x[y, x], plane_y[y, x], half32, resolution32)
                 mine[y, x] = m
                 wv = raw[k, y, x] if m and on_card[k, y, x] else _F32(0.0)
                 weight[y, x] = wv
                 dark[y, x] = wv > threshold
+                connected[k, y, x] = not wv > threshold
         # Dark things apart from the dot are not the dot's: its own dark
         # region (8-connected) is the one with the darkest pixel within a
         # pixel and a half of the centre (the first such, row by row).
@@ -501,9 +518,6 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
             for x in range(_start(c0 - 1.5, size), _stop(c0 + 1.5, size)):
                 if abs(x - c0) <= 1.5 and abs(y - c1) <= 1.5 and weight[y, x] > best_value:
                     best, best_value = y * size + x, weight[y, x]
-        for y in range(size):
-            for x in range(size):
-                connected[k, y, x] = not dark[y, x]
         if dark[best // size, best % size]:
             _flood(dark, connected[k], best, stack)
         for y in range(size):

@@ -949,6 +949,77 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
     return ok, found[0], agreed, slot_letter, margins, grey, found[1]
 
 
+# A centre read as black must be black ink, the ink of point 1 on the same
+# card: a dark colour (a green printed too dark, or seen under light that
+# leaves little of it) is nearer black than its configured ink, yet still
+# unlike point 1 in one channel. Its colour (each channel over the channels'
+# mean) must lie within this of point 1's...
+_BLACK_AS_POINT1 = 0.03
+# ...or within this many times the scatter between the ring's dots of one
+# ink (noise, JPEG, blur): a true black centre came within 0.029 of point 1
+# on 880 stress frames, 2.6 scatters at most where that was more; green
+# centres printed dark (sRGB 10, 100, 40) read black came 0.038 or more, and
+# at least 3 scatters off.
+_BLACK_SCATTERS = 2.5
+
+
+@_kernel
+def _unlike_point1(unit, ring_valid, slot_letter, black, n_rings):
+    """Tell whether the centre's colour (``unit`` row 0) differs from point 1's beyond noise."""
+    point1 = np.zeros(3)
+    for r in range(n_rings):
+        if ring_valid[r, black]:
+            for c in range(3):
+                point1[c] += unit[1 + r * RING_POINTS + black, c]
+    p_mean = ((point1[0] + point1[1]) + point1[2]) / 3
+    c_mean = ((unit[0, 0] + unit[0, 1]) + unit[0, 2]) / 3
+    if not (p_mean > 0.0 and c_mean > 0.0):
+        return True
+    apart = 0.0
+    for c in range(3):
+        apart = max(apart, abs(unit[0, c] / c_mean - point1[c] / p_mean))
+    return not apart <= max(_BLACK_AS_POINT1, _BLACK_SCATTERS * _ink_scatter(
+        unit, ring_valid, slot_letter, n_rings))
+
+
+@_kernel
+def _ink_scatter(unit, ring_valid, slot_letter, n_rings):
+    """
+    RMS over the ring's dots of their colour's largest channel difference from their ink's mean.
+
+    Colours as :func:`_unlike_point1` compares them (each channel over the
+    channels' mean); inks with one dot only give nothing; 0 when none has two.
+    """
+    total, count = 0.0, 0
+    mean = np.empty(3)
+    for ink in range(4):
+        mean[:] = 0.0
+        n = 0
+        for r in range(n_rings):
+            for k in range(RING_POINTS):
+                i = 1 + r * RING_POINTS + k
+                m = ((unit[i, 0] + unit[i, 1]) + unit[i, 2]) / 3
+                if ring_valid[r, k] and slot_letter[r, k] == ink and m > 0.0:
+                    for c in range(3):
+                        mean[c] += unit[i, c] / m
+                    n += 1
+        if n < 2:
+            continue
+        for c in range(3):
+            mean[c] /= n
+        for r in range(n_rings):
+            for k in range(RING_POINTS):
+                i = 1 + r * RING_POINTS + k
+                m = ((unit[i, 0] + unit[i, 1]) + unit[i, 2]) / 3
+                if ring_valid[r, k] and slot_letter[r, k] == ink and m > 0.0:
+                    worst = 0.0
+                    for c in range(3):
+                        worst = max(worst, abs(unit[i, c] / m - mean[c]))
+                    total += worst * worst
+                    count += 1
+    return math.sqrt(total / count) if count else 0.0
+
+
 @_kernel
 def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
                max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
@@ -1097,6 +1168,8 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
         k_dark = _pairwise_sum(values, count) / count
         centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
         if centre == 0 and centre_dark < 0.8 * k_dark:
+            return False
+        if centre == 0 and _unlike_point1(unit, ring_valid, slot_letter, black, n_rings):
             return False
     elif centre == 0:
         return False         # a black centre needs point 1 to compare with

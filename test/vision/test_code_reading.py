@@ -51,6 +51,38 @@ def test_green_centre_without_green_ring_under_coloured_light_and_grey_sensor(li
     assert reading is not None and reading.code == code
 
 
+# A card printed with its inks far too dark (green sRGB 10, 100, 40 for 32,
+# 176, 80), as the detector measured it under magenta light at 2.9 m: code
+# G-KBRRRRBB, point 1 in slot 2. Its centre is nearer black than the
+# configured green, and was read black (another floor), but it is not the
+# black of point 1 (rows 3 and 11): its green channel is 0.1 less dark.
+DARK_GREEN_CENTRE = np.array([
+    [0.9421, 0.8698, 0.9558], [0.7821, 0.9291, 0.9461], [0.7826, 0.9305, 0.9464],
+    [0.9661, 0.9674, 0.9661], [0.7776, 0.9285, 0.9457], [0.9369, 0.928, 0.705],
+    [0.9346, 0.9254, 0.705], [0.9372, 0.9261, 0.7084], [0.9372, 0.9271, 0.7119],
+    [0.7806, 0.9288, 0.9461], [0.7796, 0.9327, 0.9477], [0.9659, 0.9671, 0.9653],
+    [0.7781, 0.9304, 0.9457], [0.9387, 0.9271, 0.7085], [0.9364, 0.9244, 0.7079],
+    [0.9372, 0.9287, 0.7074], [0.9382, 0.9237, 0.7137]])
+DARK_GREEN_WHITE = np.array([217.0, 174.0, 216.0])
+
+
+def test_a_dark_colour_in_the_centre_is_not_taken_for_black():
+    assert read_code(DARK_GREEN_CENTRE, ALL, 2, CFG, PARAMS, DARK_GREEN_WHITE) is None
+    # The same card with point 1's black in the centre reads, black centre.
+    black = DARK_GREEN_CENTRE.copy()
+    black[0] = 0.98 * black[3]
+    reading = read_code(black, ALL, 2, CFG, PARAMS, DARK_GREEN_WHITE)
+    assert reading is not None and reading.code == Code.parse('K-KBRRRRBB')
+
+
+def test_a_black_centre_as_noisy_as_the_ring_still_reads():
+    # Black against point 1 within the ring's own scatter: read.
+    code = Code.parse('K-KBRGRRBG')
+    for seed in range(40):
+        reading = read_code(seen(code, noise=0.005, blur=0.9, seed=seed), ALL, 2, CFG, PARAMS)
+        assert reading is not None and reading.code == code, seed
+
+
 def test_a_clipped_white_is_undone():
     # Strong blue light clips the paper's blue: light channels lose darkness.
     code = Code.parse('G-KRRBRBBR')

@@ -76,6 +76,26 @@ def test_green_centre_under_weak_green_light_is_never_read_black(cast):
     assert seen >= 2                  # read right, not just refused
 
 
+# A printer whose inks come out far too dark (sRGB): its green is nearer
+# black than the configured green is.
+DARK_INKS = PatternConfig(colours_rgb=(('K', (0, 0, 0)), ('R', (150, 10, 20)),
+                                       ('G', (10, 100, 40)), ('B', (10, 30, 130))))
+
+
+@pytest.mark.parametrize('cast', [(1.0, 1.0, 1.0), (1.3, 0.7, 1.3), (1.2, 1.0, 0.75),
+                                  (0.75, 1.2, 1.2)])
+def test_green_centre_printed_too_dark_is_never_read_black(cast):
+    # Neutral, magenta, tungsten and cyan light; the detector knows the
+    # configured inks only. Not the black of point 1: no id, not another floor.
+    ids, code = green_centre_without_green_ring()
+    for k, (distance, tilt) in enumerate([(1.5, 20.0), (2.9, 40.0), (3.6, 30.0)]):
+        T = card_pose_facing(distance, tilt, 60.0 * k, 10.0, (30.0, -20.0), VGA)
+        image = render([(T, DotCardTexture(DARK_INKS, code))], colour_cast=cast, crosstalk=0.2,
+                       noise_sigma=1.5, defocus_sigma_px=0.6, seed=k)
+        assert all(c.ids is None or c.ids.as_tuple() == ids
+                   for c in DETECTOR.detect(image, VGA)), (cast, distance)
+
+
 def test_colour_channels_shifted_two_pixels_are_read_right():
     # Red and blue images 2 px from the green one (composite video, a cheap
     # lens), a lens's lateral colour and composite video's narrow chroma band.

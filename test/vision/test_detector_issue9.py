@@ -83,10 +83,11 @@ DARK_INKS = PatternConfig(colours_rgb=(('K', (0, 0, 0)), ('R', (150, 10, 20)),
 
 
 @pytest.mark.parametrize('cast', [(1.0, 1.0, 1.0), (1.3, 0.7, 1.3), (1.2, 1.0, 0.75),
-                                  (0.75, 1.2, 1.2)])
+                                  (0.75, 1.2, 1.2), (0.8, 1.4, 0.8)])
 def test_green_centre_printed_too_dark_is_never_read_black(cast):
-    # Neutral, magenta, tungsten and cyan light; the detector knows the
-    # configured inks only. Not the black of point 1: no id, not another floor.
+    # Neutral, magenta, tungsten, cyan and green light; the detector knows
+    # the configured inks only. Not the black of point 1: no id, not another
+    # floor.
     ids, code = green_centre_without_green_ring()
     for k, (distance, tilt) in enumerate([(1.5, 20.0), (2.9, 40.0), (3.6, 30.0)]):
         T = card_pose_facing(distance, tilt, 60.0 * k, 10.0, (30.0, -20.0), VGA)
@@ -94,6 +95,19 @@ def test_green_centre_printed_too_dark_is_never_read_black(cast):
                        noise_sigma=1.5, defocus_sigma_px=0.6, seed=k)
         assert all(c.ids is None or c.ids.as_tuple() == ids
                    for c in DETECTOR.detect(image, VGA)), (cast, distance)
+
+
+def test_green_centre_printed_too_dark_in_dim_green_light_is_never_read_black():
+    # A stress frame (light green, seed 60) that read floor 2 for floor 8:
+    # there the white fitted to such inks brings the centre near black.
+    ids = (8, 7, 9)
+    T = card_pose_facing(2.596, 13.914, 19.312, -22.933, (-212.262, -17.643), VGA)
+    image = render([(T, DotCardTexture(DARK_INKS, CFG.encode(*ids)))], supersample=2,
+                   gain=0.638, colour_cast=(0.776, 1.363, 0.806), gradient=0.11,
+                   gradient_angle_deg=65.85, defocus_sigma_px=0.672, noise_sigma=1.149,
+                   shot_noise=0.00966, jpeg_quality=85, crosstalk=0.1946, background='wall',
+                   seed=44741746)
+    assert all(c.ids is None or c.ids.as_tuple() == ids for c in DETECTOR.detect(image, VGA))
 
 
 def test_colour_channels_shifted_two_pixels_are_read_right():

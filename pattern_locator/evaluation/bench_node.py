@@ -8,7 +8,7 @@ rate), the latency from publishing an image to receiving its
 ``/robot_location``, and, in the same run and on the same images, the
 core's own time per frame (``RobotLocalizer.process`` in this process): the
 difference is the node's overhead (conversion, DDS, threads). A first table
-compares medians; a second gives each series' tail (mean, p99, max; the
+compares medians; a second gives each series' tail (mean, p95, p99, max; the
 node's own time as its diagnostics report it: median, p95, max).
 """
 

@@ -957,7 +957,7 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
 _BLACK_AS_POINT1 = 0.03
 # ...or within this many times the scatter between the ring's dots of one
 # ink (noise, JPEG, blur), whichever is more. Black centres came within
-# 0.029 of point 1 in 675 readings of 3,600 stress frames (as measured);
+# 0.029 of point 1 in 675 readings of 4,400 stress frames (as measured);
 # green centres printed dark (sRGB 10, 100, 40) and read black came 0.038
 # or more as measured, but as little as 0.025 against the white fitted to
 # such inks: both must pass.

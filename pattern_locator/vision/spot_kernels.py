@@ -343,7 +343,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
                     | (_ellipse_at(axes, k, x, y, ca, cb, oa, ob) <= 1.0)
         # The spot's share of the plane in a loop of its own: its raster
         # look-up kept the loop above from being compiled to vector
-        # instructions, which made it twice as slow.
+        # instructions.
         spot = spots[i]
         for y in range(size):
             for x in range(size):

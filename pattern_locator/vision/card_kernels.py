@@ -949,11 +949,15 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
     return ok, found[0], agreed, slot_letter, margins, grey, found[1]
 
 
-# A centre read as black must be black ink, the ink of point 1 on the same
-# card: a dark colour (a green printed too dark, or seen under light that
-# leaves little of it) is nearer black than its configured ink, yet still
-# unlike point 1 in one channel. Its colour (each channel over the channels'
-# mean) must lie within this of point 1's...
+# A centre read as black must be black ink: a dark colour (a green printed
+# too dark, or seen under light that leaves little of it) is nearer black
+# than its configured ink, yet still unlike black in one channel. Black is
+# grey (every channel within this of the channels' mean: the dark greens
+# read black were 0.041 or more off)...
+_BLACK_GREY = 0.02
+# ...or, where the light or a clipped white makes it less so, the colour of
+# point 1 on the same card: each channel over the channels' mean within this
+# of point 1's...
 _BLACK_AS_POINT1 = 0.03
 # ...or within this many times the scatter between the ring's dots of one
 # ink (noise, JPEG, blur), whichever is more. Black centres came within
@@ -962,6 +966,18 @@ _BLACK_AS_POINT1 = 0.03
 # or more as measured, but as little as 0.025 against the white fitted to
 # such inks: both must pass.
 _BLACK_SCATTERS = 2.5
+
+
+@_kernel
+def _grey(colour):
+    """Tell whether a colour (3) is grey: each channel within _BLACK_GREY of the channels' mean."""
+    mean = ((colour[0] + colour[1]) + colour[2]) / 3
+    if not mean > 0.0:
+        return False
+    worst = 0.0
+    for c in range(3):
+        worst = max(worst, abs(colour[c] / mean - 1.0))
+    return worst <= _BLACK_GREY
 
 
 @_kernel
@@ -1175,10 +1191,12 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
         centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
         if centre == 0 and centre_dark < 0.8 * k_dark:
             return False
-        # As measured, and against the fitted white: a fit thrown by inks
-        # unlike the configured ones can move a dark colour towards black.
-        if centre == 0 and (_unlike_point1(darkness, ring_valid, slot_letter, black, n_rings)
-                            or _unlike_point1(unit, ring_valid, slot_letter, black, n_rings)):
+        # Grey as measured, or as point 1 both as measured and against the
+        # fitted white (a fit thrown by inks unlike the configured ones can
+        # move a dark colour towards black).
+        if centre == 0 and not _grey(darkness[0]) and (
+                _unlike_point1(darkness, ring_valid, slot_letter, black, n_rings)
+                or _unlike_point1(unit, ring_valid, slot_letter, black, n_rings)):
             return False
     elif centre == 0:
         return False         # a black centre needs point 1 to compare with

@@ -75,6 +75,23 @@ def test_a_dark_colour_in_the_centre_is_not_taken_for_black():
     assert reading is not None and reading.code == Code.parse('K-KBRRRRBB')
 
 
+# A card 4 m away seen through a Bayer mosaic (GBRG, bilinear demosaicing,
+# as the node decodes it): code K-KRRRBRRG, point 1 in slot 6. Its small
+# point-1 dots have colour fringes (rows 7 and 15); its big centre is grey.
+BAYER_CARD = np.array([
+    [0.9543, 0.9554, 0.9528], [0.6565, 0.7142, 0.154], [0.7135, 0.7503, 0.1471],
+    [0.2504, 0.6819, 0.6708], [0.6924, 0.7433, 0.1604], [0.6798, 0.727, 0.1573],
+    [0.5807, 0.4005, 0.7015], [0.6619, 0.7304, 0.6915], [0.6836, 0.739, 0.1584],
+    [0.6583, 0.6998, 0.1625], [0.6849, 0.7395, 0.1386], [0.2453, 0.7088, 0.6906],
+    [0.6864, 0.722, 0.1529], [0.6796, 0.7208, 0.1444], [0.5791, 0.3971, 0.6955],
+    [0.681, 0.7218, 0.6573], [0.6827, 0.733, 0.1671]])
+
+
+def test_a_grey_black_centre_reads_though_point_1_has_colour_fringes():
+    reading = read_code(BAYER_CARD, ALL, 2, CFG, PARAMS, np.array([237.0, 236.0, 236.0]), 1)
+    assert reading is not None and reading.code == Code.parse('K-KRRRBRRG')
+
+
 def test_a_black_centre_as_noisy_as_the_ring_still_reads():
     # Black against point 1 within the ring's own scatter: read.
     code = Code.parse('K-KBRGRRBG')

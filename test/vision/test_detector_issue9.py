@@ -110,6 +110,29 @@ def test_green_centre_printed_too_dark_in_dim_green_light_is_never_read_black():
     assert all(c.ids is None or c.ids.as_tuple() == ids for c in DETECTOR.detect(image, VGA))
 
 
+def bayer_demosaiced(image):
+    """The image as a GBRG Bayer camera gives it, demosaiced as the node decodes it."""
+    from pattern_locator.nodes.image_codec import decode_image
+    channel = {'B': 0, 'G': 1, 'R': 2}
+    mosaic = np.empty(image.shape[:2], np.uint8)
+    for dy in range(2):
+        for dx in range(2):
+            mosaic[dy::2, dx::2] = image[dy::2, dx::2, channel['GBRG'[2 * dy + dx]]]
+    h, w = mosaic.shape
+    return decode_image(h, w, 'bayer_gbrg8', 0, w, mosaic.tobytes())
+
+
+def test_black_centres_read_through_a_bayer_mosaic():
+    # The paper's room seen by a 640x480 camera through a GBRG Bayer mosaic
+    # (the node's encoding test): bilinear demosaicing gives the small
+    # point-1 dots of a card 4 m away colour fringes; its big black centre
+    # stays grey, and is read black.
+    from scene_tools import base_pose, CAMERA, view
+    image, _ = view(1, 3, base_pose(4.0, 2.5, 180.0), 0.0, math.radians(15.0))
+    codes = [str(c.code) for c in DETECTOR.detect(bayer_demosaiced(image), CAMERA)]
+    assert codes == ['K-KRRRBRRG']
+
+
 def test_colour_channels_shifted_two_pixels_are_read_right():
     # Red and blue images 2 px from the green one (composite video, a cheap
     # lens), a lens's lateral colour and composite video's narrow chroma band.

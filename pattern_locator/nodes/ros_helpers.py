@@ -17,6 +17,7 @@ import signal
 import sys
 import threading
 import time
+import traceback
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -318,6 +319,13 @@ def _ignore_signals() -> None:
             pass
 
 
+def failed_take(exc: BaseException) -> bool:
+    """Tell whether ``exc`` was raised while rclpy's executor took a message from DDS."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    return any(f.name.startswith('_take_')
+               and f.filename.replace('\\', '/').endswith('rclpy/executors.py') for f in frames)
+
+
 def run_node(make_node: Callable[[], Node], name: str, args=None) -> None:
     """
     Spin a node until SIGINT or SIGTERM; exit 1 with one line on stderr if it cannot start.
@@ -340,7 +348,22 @@ def run_node(make_node: Callable[[], Node], name: str, args=None) -> None:
             node = make_node()
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            executor.spin()
+            failed_takes = 0
+            while True:
+                try:
+                    executor.spin()
+                    break
+                except RuntimeError as exc:
+                    # A message DDS delivered that rclpy could not turn into
+                    # a Python message (seen when a publisher of images in
+                    # shared memory died mid-message): that message is
+                    # lost, the node is not.
+                    if not rclpy.ok() or not failed_take(exc):
+                        raise
+                    failed_takes += 1
+                    node.get_logger().warning(
+                        f'a message could not be taken ({clean_text(str(exc), 200)}); '
+                        f'{failed_takes} so far', throttle_duration_sec=5.0)
         except (KeyboardInterrupt, ExternalShutdownException):
             _ignore_signals()
         except PatternLocatorError as exc:

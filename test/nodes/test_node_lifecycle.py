@@ -137,3 +137,23 @@ def test_every_node_exits_0_on_repeated_signals(tmp_path, ros_node):
             assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
     finally:
         _stop(procs.values())
+
+
+def test_a_message_rclpy_could_not_take_is_told_from_other_errors():
+    # rclpy raised this from its executor's take (a publisher of images in
+    # shared memory killed mid-message): run_node logs it and spins on. Any
+    # other error (a bug in a callback) still ends the node with its traceback.
+    from pattern_locator.nodes.ros_helpers import failed_take
+    namespace = {}
+    source = ('def _take_subscription(sub):\n'
+              '    raise RuntimeError("Unable to convert call argument to Python object")\n')
+    exec(compile(source, '/opt/ros/jazzy/lib/python3.12/site-packages/rclpy/executors.py',
+                 'exec'), namespace)
+
+    def callback():
+        raise RuntimeError('a bug in a callback')
+
+    for raiser, expected in ((namespace['_take_subscription'], True), (callback, False)):
+        with pytest.raises(RuntimeError) as caught:
+            raiser(None) if expected else raiser()
+        assert failed_take(caught.value) is expected

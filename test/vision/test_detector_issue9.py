@@ -111,7 +111,7 @@ def test_green_centre_printed_too_dark_in_dim_green_light_is_never_read_black():
 
 
 def bayer_demosaiced(image):
-    """The image as a GBRG Bayer camera gives it, demosaiced as the node decodes it."""
+    """Return the image as a GBRG Bayer camera gives it, demosaiced as the node decodes it."""
     from pattern_locator.nodes.image_codec import decode_image
     channel = {'B': 0, 'G': 1, 'R': 2}
     mosaic = np.empty(image.shape[:2], np.uint8)

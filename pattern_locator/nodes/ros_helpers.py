@@ -355,9 +355,9 @@ def run_node(make_node: Callable[[], Node], name: str, args=None) -> None:
                     break
                 except RuntimeError as exc:
                     # A message DDS delivered that rclpy could not turn into
-                    # a Python message (seen when a publisher of images in
-                    # shared memory died mid-message): that message is
-                    # lost, the node is not.
+                    # a Python message (seen once in a test, while the nodes
+                    # that publish to the locator were being stopped): that
+                    # message is lost, the node is not.
                     if not rclpy.ok() or not failed_take(exc):
                         raise
                     failed_takes += 1

@@ -140,8 +140,8 @@ def test_every_node_exits_0_on_repeated_signals(tmp_path, ros_node):
 
 
 def test_a_message_rclpy_could_not_take_is_told_from_other_errors():
-    # rclpy raised this from its executor's take (a publisher of images in
-    # shared memory killed mid-message): run_node logs it and spins on. Any
+    # rclpy raised this from its executor's take (once in a test, while the
+    # nodes publishing to the locator were stopped): run_node logs it and spins on. Any
     # other error (a bug in a callback) still ends the node with its traceback.
     from pattern_locator.nodes.ros_helpers import failed_take
     namespace = {}

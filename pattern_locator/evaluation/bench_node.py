@@ -158,8 +158,6 @@ def _measure(camera: CameraModel, frames: List[np.ndarray], rate_hz: float) -> D
         'sent': len(sent), 'located': len(latencies), 'node': counts,
         'fps': len(latencies) / duration if duration else math.nan,
         'latencies_ms': latencies,
-        'median_ms': float(np.median(latencies)) if latencies else math.nan,
-        'p95_ms': float(np.percentile(latencies, 95)) if latencies else math.nan,
     }
 
 
@@ -213,13 +211,16 @@ def run_node_bench(frames_per_size: int = 40, rate_hz: float = 30.0) -> int:
         paced_times = _core_ms(camera, frames, rate_hz)
         result = _run_node_bench(camera, frames, rate_hz)
         tight, core = float(np.median(tight_times)), float(np.median(paced_times))
+        latencies = result['latencies_ms']
+        latency = float(np.median(latencies)) if latencies else math.nan
+        latency_p95 = float(np.percentile(latencies, 95)) if latencies else math.nan
         node = _node_ms(result['node'], 'median')
         size = f'{camera.width}x{camera.height}'
         tails[size] = {'tight': tight_times, 'paced': paced_times,
-                       'latency': result['latencies_ms'], 'node': result['node']}
+                       'latency': latencies, 'node': result['node']}
         print(f'{size:<12}{tight:>11.2f}{core:>9.2f}{node:>9.2f}'
-              f'{result["median_ms"]:>13.2f}{result["p95_ms"]:>8.2f}'
-              f'{result["median_ms"] - node:>7.2f}{node - core:>13.2f}'
+              f'{latency:>13.2f}{latency_p95:>8.2f}'
+              f'{latency - node:>7.2f}{node - core:>13.2f}'
               f'{f"{result["located"]}/{result["sent"]}":>9}{result["fps"]:>7.1f}')
     print("core tight: the core's median time per frame back to back in this process; "
           'core ms: the same, paced at the rate above as the node receives them (each frame '

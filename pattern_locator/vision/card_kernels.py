@@ -969,14 +969,20 @@ _BLACK_SCATTERS = 2.5
 
 
 @_kernel
-def _grey(colour):
-    """Tell whether a colour (3) is grey: each channel within _BLACK_GREY of the channels' mean."""
-    mean = ((colour[0] + colour[1]) + colour[2]) / 3
+def _channel_mean(colours, i):
+    """Mean of row ``i``'s three channels (summed in numpy's order)."""
+    return ((colours[i, 0] + colours[i, 1]) + colours[i, 2]) / 3
+
+
+@_kernel
+def _grey(colours, i):
+    """Tell whether row ``i`` is grey: each channel within _BLACK_GREY of the channels' mean."""
+    mean = _channel_mean(colours, i)
     if not mean > 0.0:
         return False
     worst = 0.0
     for c in range(3):
-        worst = max(worst, abs(colour[c] / mean - 1.0))
+        worst = max(worst, abs(colours[i, c] / mean - 1.0))
     return worst <= _BLACK_GREY
 
 
@@ -994,14 +1000,21 @@ def _unlike_point1(unit, ring_valid, slot_letter, black, n_rings):
             for c in range(3):
                 point1[c] += unit[1 + r * RING_POINTS + black, c]
     p_mean = ((point1[0] + point1[1]) + point1[2]) / 3
-    c_mean = ((unit[0, 0] + unit[0, 1]) + unit[0, 2]) / 3
+    c_mean = _channel_mean(unit, 0)
     if not (p_mean > 0.0 and c_mean > 0.0):
         return True
     apart = 0.0
     for c in range(3):
         apart = max(apart, abs(unit[0, c] / c_mean - point1[c] / p_mean))
-    return not apart <= max(_BLACK_AS_POINT1, _BLACK_SCATTERS * _ink_scatter(
-        unit, ring_valid, slot_letter, n_rings))
+    if apart <= _BLACK_AS_POINT1:
+        return False            # the ring's scatter can only allow more
+    return not apart <= _BLACK_SCATTERS * _ink_scatter(unit, ring_valid, slot_letter, n_rings)
+
+
+@_kernel
+def _ink_dot(slot_letter, shape, j, ink):
+    """Tell whether ring dot ``j`` (ring-major) is of ``ink`` and counted (``shape`` not NaN)."""
+    return slot_letter[j // RING_POINTS, j % RING_POINTS] == ink and shape[j, 0] == shape[j, 0]
 
 
 @_kernel
@@ -1012,33 +1025,37 @@ def _ink_scatter(unit, ring_valid, slot_letter, n_rings):
     Colours as :func:`_unlike_point1` compares them (each channel over the
     channels' mean); inks with one dot only give nothing; 0 when none has two.
     """
+    # Each ring dot's colour over its channels' mean, once (NaN: not counted).
+    n_dots = n_rings * RING_POINTS
+    shape = np.full((n_dots, 3), np.nan)
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            i = 1 + r * RING_POINTS + k
+            m = _channel_mean(unit, i)
+            if ring_valid[r, k] and m > 0.0:
+                for c in range(3):
+                    shape[i - 1, c] = unit[i, c] / m
     total, count = 0.0, 0
     mean = np.empty(3)
     for ink in range(4):
         mean[:] = 0.0
         n = 0
-        for r in range(n_rings):
-            for k in range(RING_POINTS):
-                i = 1 + r * RING_POINTS + k
-                m = ((unit[i, 0] + unit[i, 1]) + unit[i, 2]) / 3
-                if ring_valid[r, k] and slot_letter[r, k] == ink and m > 0.0:
-                    for c in range(3):
-                        mean[c] += unit[i, c] / m
-                    n += 1
+        for j in range(n_dots):
+            if _ink_dot(slot_letter, shape, j, ink):
+                for c in range(3):
+                    mean[c] += shape[j, c]
+                n += 1
         if n < 2:
             continue
         for c in range(3):
             mean[c] /= n
-        for r in range(n_rings):
-            for k in range(RING_POINTS):
-                i = 1 + r * RING_POINTS + k
-                m = ((unit[i, 0] + unit[i, 1]) + unit[i, 2]) / 3
-                if ring_valid[r, k] and slot_letter[r, k] == ink and m > 0.0:
-                    worst = 0.0
-                    for c in range(3):
-                        worst = max(worst, abs(unit[i, c] / m - mean[c]))
-                    total += worst * worst
-                    count += 1
+        for j in range(n_dots):
+            if _ink_dot(slot_letter, shape, j, ink):
+                worst = 0.0
+                for c in range(3):
+                    worst = max(worst, abs(shape[j, c] - mean[c]))
+                total += worst * worst
+                count += 1
     return math.sqrt(total / count) if count else 0.0
 
 
@@ -1130,7 +1147,7 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
     for r in range(n_rings):
         for k in range(RING_POINTS):
             i = 1 + r * RING_POINTS + k
-            mean_colour = ((colour[i, 0] + colour[i, 1]) + colour[i, 2]) / 3
+            mean_colour = _channel_mean(colour, i)
             if ring_valid[r, k] and letter[i] == 0 and mean_colour < 0.7 * ink_dark:
                 grey[r, k] = True
                 ring_valid[r, k] = False
@@ -1188,13 +1205,13 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                     values[count] = darkness[1 + r * RING_POINTS + black, c]
                     count += 1
         k_dark = _pairwise_sum(values, count) / count
-        centre_dark = ((darkness[0, 0] + darkness[0, 1]) + darkness[0, 2]) / 3
+        centre_dark = _channel_mean(darkness, 0)
         if centre == 0 and centre_dark < 0.8 * k_dark:
             return False
         # Grey as measured, or as point 1 both as measured and against the
         # fitted white (a fit thrown by inks unlike the configured ones can
         # move a dark colour towards black).
-        if centre == 0 and not _grey(darkness[0]) and (
+        if centre == 0 and not _grey(darkness, 0) and (
                 _unlike_point1(darkness, ring_valid, slot_letter, black, n_rings)
                 or _unlike_point1(unit, ring_valid, slot_letter, black, n_rings)):
             return False

@@ -247,17 +247,16 @@ def _ippe(obj: np.ndarray, observed_px: np.ndarray, K: np.ndarray):
     """Return the planar solutions (IPPE's): (squared error, R, t, projection) each."""
     obj = obj.astype(np.float64)
     image = observed_px.astype(np.float64).reshape(-1, 1, 2)
+
+    def finite_solutions(flags: int):
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, image, K, None, flags=flags)
+        return [(r, t) for r, t in list(zip(rvecs, tvecs))[:n]
+                if np.isfinite(r).all() and np.isfinite(t).all()]
+
     try:
-        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, image, K, None, flags=cv2.SOLVEPNP_IPPE)
-        found = [(r, t) for r, t in list(zip(rvecs, tvecs))[:n] if np.isfinite(r).all()
-                 and np.isfinite(t).all()]
-        if not found:
-            # OpenCV's IPPE gives NaN on some exact (noise-free) views; the
-            # global SQPnP gives their one solution.
-            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, image, K, None,
-                                                     flags=cv2.SOLVEPNP_SQPNP)
-            found = [(r, t) for r, t in list(zip(rvecs, tvecs))[:n] if np.isfinite(r).all()
-                     and np.isfinite(t).all()]
+        # OpenCV's IPPE gives NaN on some exact (noise-free) views; the
+        # global SQPnP gives their one solution.
+        found = finite_solutions(cv2.SOLVEPNP_IPPE) or finite_solutions(cv2.SOLVEPNP_SQPNP)
     except cv2.error as exc:
         raise EstimationError(f'planar PnP failed: {exc.msg if hasattr(exc, "msg") else exc}')
     if not found:

@@ -507,7 +507,7 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
                 wv = raw[k, y, x] if m and on_card[k, y, x] else _F32(0.0)
                 weight[y, x] = wv
                 dark[y, x] = wv > threshold
-                connected[k, y, x] = not wv > threshold
+                connected[k, y, x] = not dark[y, x]
         # Dark things apart from the dot are not the dot's: its own dark
         # region (8-connected) is the one with the darkest pixel within a
         # pixel and a half of the centre (the first such, row by row).

@@ -224,8 +224,8 @@ class FixGates:
     # Static gates ----------------------------------------------------------------
 
     def check(self, T_frame_base: Pose, covariance: Optional[np.ndarray], frame_id: str,
-              room: Optional[Room] = None, T_camera_card: Optional[Pose] = None
-              ) -> Optional[Rejection]:
+              room: Optional[Room] = None, T_camera_card: Optional[Pose] = None,
+              counted: bool = True) -> Optional[Rejection]:
         """
         Return why a fix fails a static gate (counted), or None if it passes them all.
 
@@ -233,9 +233,10 @@ class FixGates:
         or the building's); ``room``: the room the base should be in (the
         card's; default: the room of ``frame_id``); ``T_camera_card``: the
         card in the camera frame, when the fix comes from one card.
+        ``counted=False``: a hypothesis tried, not a fix refused; not counted.
         """
         rejection = self._static(T_frame_base, covariance, frame_id, room, T_camera_card)
-        return None if rejection is None else self.count(rejection)
+        return None if rejection is None or not counted else self.count(rejection)
 
     def _static(self, T_frame_base: Pose, covariance: Optional[np.ndarray], frame_id: str,
                 room: Optional[Room], T_camera_card: Optional[Pose]) -> Optional[Rejection]:
@@ -382,18 +383,32 @@ class FixGates:
         without the second-image confirmation). It never starts or restarts
         the location.
         """
-        fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
-        last = self._accepted
-        if fix is None or last is None:
+        distance = self.distance_from_last(T_frame_base, covariance, frame_id, stamp_s,
+                                           odometry)
+        if distance is None:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map; '
                 'taken only to follow a robot already located'))
-        distance = self._distance(last, fix, odometry)
         if distance > self.parameters.max_jump_mahalanobis:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map, '
                 f'{distance:.3g} (Mahalanobis) from where the last fix puts the robot'))
         return None
+
+    def distance_from_last(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
+                           stamp_s: Optional[float], odometry: Optional[BaseMotion] = None
+                           ) -> Optional[float]:
+        """
+        Return how far (Mahalanobis) a fix is from where the last fix puts the robot.
+
+        None when that cannot be judged: no last fix, no stamp, or the
+        continuity gate off. Nothing is counted or remembered.
+        """
+        fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
+        last = self._accepted
+        if fix is None or last is None:
+            return None
+        return self._distance(last, fix, odometry)
 
     def _judged(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
                 stamp_s: Optional[float]) -> Optional[_Fix]:

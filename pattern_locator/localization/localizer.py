@@ -155,6 +155,15 @@ class RobotLocalizer:
         for det in detections:
             if target is None:
                 target = (*_head_motion(camera, det.centre_px), det.size_px)
+            if det.ids is None and det.candidates:
+                fix, rejection = self._choose(det, camera, T_base_camera, motion, base_twist,
+                                              stamp_s, odometry)
+                if rejection is not None:
+                    problems.append(rejection.message)
+                    rejections.append(rejection.reason)
+                else:
+                    fixes.append(fix)
+                continue
             if det.ids is None:
                 problems.append('grey image: cards have no code, so no location')
                 continue
@@ -212,6 +221,51 @@ class RobotLocalizer:
         return FrameResult(fix, len(detections), tuple(problems), target, tuple(detections),
                            tuple(rejections))
 
+    def _choose(self, det: CardDetection, camera: CameraModel, T_base_camera: Pose,
+                motion: HeadMotion, twist: Optional[BaseTwist], stamp_s: Optional[float],
+                odometry: Optional[BaseMotion]) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
+        """
+        Return the fix of the one hypothesis of a partly hidden card that fits the last fix.
+
+        The slots an object hides leave several mapped codes (``det.candidates``,
+        each with its own point 1). Each is located and put through the static
+        gates and the jump test against the last fix, none of them counted; the
+        card gives a fix only when exactly one passes. Cards that share the
+        slots seen hang in other places (a room's other cards, the same card
+        number on the next floor), so at most one of them puts the robot where
+        it can be; with no last fix to judge by there is no answer.
+        """
+        label = f'card with {det.slots_from_map} slot(s) hidden'
+        passing: List[RobotFix] = []
+        for option in det.candidates:
+            try:
+                mapped = self.building.card(option.ids)
+            except CodeError:
+                continue
+            prior = self._prior(mapped, T_base_camera, motion.pan, motion.tilt)
+            located = self.locator.pose_of(option, camera, prior)
+            if located.T_camera_pattern is None or (
+                    located.reprojection_rms_px is not None
+                    and located.reprojection_rms_px > self.max_reprojection_px):
+                continue
+            fix, rejection = self._fix(option, mapped, located, camera, motion, twist,
+                                       counted=False)
+            if rejection is not None:
+                continue
+            distance = self.gates.distance_from_last(fix.T_frame_base, fix.covariance,
+                                                     fix.frame_id, stamp_s, odometry)
+            if distance is None:
+                return None, self.gates.count(Rejection(
+                    'partial_code', f'{label}: {len(det.candidates)} mapped codes fit the '
+                    'slots seen; chosen only by a last fix, and there is none'))
+            if distance <= self.gates.parameters.max_jump_mahalanobis:
+                passing.append(fix)
+        if len(passing) == 1:
+            return passing[0], None
+        return None, self.gates.count(Rejection(
+            'partial_code', f'{label}: {len(passing)} of the {len(det.candidates)} mapped codes '
+            'that fit the slots seen put the robot where its last fix allows (one needed)'))
+
     def _room(self, fix: RobotFix):
         """Return the room of the card a fix came from."""
         return self.building.room(fix.ids.floor, fix.ids.room)
@@ -236,7 +290,8 @@ class RobotLocalizer:
                          previous_camera_in_pattern=previous)
 
     def _fix(self, det, mapped: MappedCard, located, camera: CameraModel, motion: HeadMotion,
-             twist: Optional[BaseTwist]) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
+             twist: Optional[BaseTwist], counted: bool = True
+             ) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
         """Return the base's fix from one card and why the gates refuse it (or None)."""
         pan, tilt = motion.pan, motion.tilt
         T_camera_card = located.T_camera_pattern
@@ -263,7 +318,8 @@ class RobotLocalizer:
                 covariance = covariance_to_base(located.covariance, T_frame_card,
                                                 T_camera_card, self.head, pan, tilt)
         room = self.building.room(mapped.ids.floor, mapped.ids.room)
-        rejection = self.gates.check(T_frame_base, covariance, frame_id, room, T_camera_card)
+        rejection = self.gates.check(T_frame_base, covariance, frame_id, room, T_camera_card,
+                                     counted)
         if rejection is not None:
             return None, rejection
         pan_to, tilt_to = _head_motion_from_pose(T_camera_card)

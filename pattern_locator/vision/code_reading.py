@@ -156,43 +156,64 @@ def code_table(codes: Iterable[Code]) -> np.ndarray:
     return table
 
 
+def partial_hypotheses(reading: Reading, codes: Sequence[Code], table: np.ndarray,
+                       decisive_margin: float = np.inf
+                       ) -> Tuple[Tuple[Tuple[Code, int], ...], Tuple[Tuple[Code, int], ...]]:
+    """
+    Return the known codes a partial reading cannot rule out: (fitting, doubtful).
+
+    A hypothesis is a known code with point 1 in one slot (``table``:
+    :func:`code_table` of ``codes``, ``codes`` in its row order,
+    ``sorted(set(codes), key=str)``), as (code, point-1 slot). ``fitting``
+    agree with every seen slot and the centre (each read with the usual
+    margin by :func:`read_code`); ``doubtful`` disagree in one seen slot
+    only, read with less than ``decisive_margin`` (default: any margin), so
+    that one misread slot would make them fit.
+    """
+    if not reading.slot_letters or len(table) == 0:
+        return (), ()
+    seen = np.array([LETTERS.index(c) if c != '?' else -1
+                     for c in reading.slot_letters + reading.centre_letter])
+    shown = seen >= 0
+    wrong = (table != seen[None, None, :]) & shown[None, None, :]          # (N, 8, 9)
+    differ = np.count_nonzero(wrong, axis=2)                                # (N, 8)
+    fitting = tuple((codes[int(n)], int(p)) for n, p in np.argwhere(differ == 0))
+    near = np.argwhere(differ == 1)
+    doubtful: Tuple[Tuple[Code, int], ...] = ()
+    if len(near):
+        margins = np.nan_to_num(np.asarray(reading.slot_margins, dtype=float), nan=0.0)
+        slot = np.argmax(wrong[near[:, 0], near[:, 1]], axis=1)
+        weak = margins[slot] < decisive_margin
+        doubtful = tuple((codes[int(n)], int(p)) for n, p in near[weak])
+    return fitting, doubtful
+
+
 def resolve_partial(reading: Reading, codes: Sequence[Code], table: np.ndarray,
                     decisive_margin: float = np.inf) -> Optional[Tuple[Code, int]]:
     """
     Complete a partial reading from the codes that exist; (code, point-1 slot) or None.
 
-    A hypothesis is a known code with point 1 in one slot (``table``:
-    :func:`code_table` of ``codes``, ``codes`` in its row order,
-    ``sorted(set(codes), key=str)``). One is taken only when:
+    One hypothesis (:func:`partial_hypotheses`) is taken only when:
 
-    * it is the only one that agrees with every seen slot and the centre
-      (each read with the usual margin by :func:`read_code`);
+    * it is the only one that agrees with every seen slot and the centre;
     * every other hypothesis (every other known code in every turn, and
       this code in any other turn) disagrees with the reading in at least
       two seen slots, or in one slot read with at least
       ``decisive_margin`` (default: two slots always): a single slot
       misread at the usual margin could then not have made the answer.
     """
-    if not reading.slot_letters or len(table) == 0:
+    return sole_hypothesis(reading, *partial_hypotheses(reading, codes, table, decisive_margin))
+
+
+def sole_hypothesis(reading: Reading, fitting: Sequence[Tuple[Code, int]],
+                    doubtful: Sequence[Tuple[Code, int]]) -> Optional[Tuple[Code, int]]:
+    """Return the one fitting hypothesis when there is no other and none in doubt, else None."""
+    if len(fitting) != 1 or doubtful:
         return None
-    seen = np.array([LETTERS.index(c) if c != '?' else -1
-                     for c in reading.slot_letters + reading.centre_letter])
-    shown = seen >= 0
-    wrong = (table != seen[None, None, :]) & shown[None, None, :]          # (N, 8, 9)
-    differ = np.count_nonzero(wrong, axis=2)                                # (N, 8)
-    match = np.argwhere(differ == 0)
-    if len(match) != 1:
-        return None
-    n, p = (int(x) for x in match[0])
+    code, p = fitting[0]
     if reading.point1_slot >= 0 and p != reading.point1_slot:
         return None
-    near = np.argwhere(differ == 1)
-    if len(near):
-        margins = np.nan_to_num(np.asarray(reading.slot_margins, dtype=float), nan=0.0)
-        slot = np.argmax(wrong[near[:, 0], near[:, 1]], axis=1)
-        if np.any(margins[slot] < decisive_margin):
-            return None
-    return codes[n], p
+    return code, p
 
 
 # Per pattern configuration (by identity: hashing one costs more than the

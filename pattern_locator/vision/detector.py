@@ -21,8 +21,9 @@ Nothing here grows faster than the pixels plus a fixed number of candidates:
 bounded time and memory on any image.
 """
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import Iterable, Iterator, List, Optional, Tuple
+from typing import Dict, Iterable, Iterator, List, Optional, Tuple
 
 import numpy as np
 
@@ -31,7 +32,8 @@ from .camera import CameraModel
 from .cards import (apply_h, CardGuess, far_candidates, fit_homography, group,
                     rank_candidates, rotation_about_z)
 from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
-from .code_reading import code_table, handedness, read_code, resolve_partial
+from .code_reading import (code_table, handedness, partial_hypotheses, read_code,
+                           sole_hypothesis)
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .drawn_card import drawn_cards
@@ -78,6 +80,10 @@ class CardDetection:
     # such an id is only as sure as the map is complete, so the localizer
     # takes it only where its last fix already puts the robot.
     slots_from_map: int = 0
+    # Hidden slots that several known codes fill: code and ids are None, and
+    # these are the hypotheses (each whole: code, point 1, points in its dot
+    # order) that the localizer chooses among by its last fix.
+    candidates: Tuple['CardDetection', ...] = ()
 
     @property
     def centre_px(self) -> np.ndarray:
@@ -100,9 +106,12 @@ class Detector:
         card with up to ``params.max_hidden_slots`` slots hidden by an object
         is given the one known code that fits what is seen, when no other
         known code comes within one seen slot of it
-        (:func:`~.code_reading.resolve_partial`); without them, only a hidden
-        point 1 is completed (the one black slot, when seven coloured ones
-        are seen).
+        (:func:`~.code_reading.resolve_partial`). When 2 to
+        ``params.max_code_candidates`` known codes remain
+        (:func:`~.code_reading.partial_hypotheses`), the card comes with no
+        code and those as its ``candidates``, for a localizer to choose among
+        by where the robot is. Without known codes, only a hidden point 1 is
+        completed (the one black slot, when seven coloured ones are seen).
         """
         self.config = config
         self.params = params
@@ -151,11 +160,16 @@ class Detector:
         for ci in candidates():
             if claimed[ci]:
                 continue
-            card = None
+            card = hidden = None
             for guess in self._guesses(dot_image, int(ci), camera):
                 card = self._measure_and_read(dot_image, guess, camera)
+                if card is not None and card.candidates:
+                    # Several codes fit: a finer grouping may yet read the slot.
+                    hidden, card = hidden or card, None
+                    continue
                 if card is not None:
                     break
+            card = card or hidden
             if card is None:
                 continue
             claimed |= self._covered(card, blobs, camera)
@@ -287,48 +301,88 @@ class Detector:
         H, valid = self._refit(spots, camera)
         if H is None:
             return None
-        ring_valid = valid[1:].reshape(n_rings, RING_POINTS)
-        complete = [r for r in range(n_rings) if np.all(ring_valid[r])]
-        from_map = 0
         if dot_image.grey_only:
-            if not complete:
-                return None
-            point1, code, ids, margin, ring_codes = 0, None, None, 0.0, ()
-        else:
-            # Colours of the dots kept by the refit, and of those whose inner
-            # part is clean though their rim is not (an object beside them).
-            readable = valid | (spots.readable & ~spots.valid)
-            reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour,
-                                max_hidden=params.max_hidden_slots if self._codes else 1,
-                                partial=spots.partial)
-            if reading is None:
-                return None
-            point1 = reading.point1_slot
-            code, margin, ring_codes = reading.code, reading.margin, reading.ring_codes
-            if code is None:
-                # Slots hidden by an object: the one known code that fits, or none.
-                resolved = resolve_partial(reading, self._codes, self._code_table,
-                                           params.decisive_margin)
-                if resolved is None:
-                    return None
-                code, point1 = resolved
-                from_map = reading.slot_letters.count('?')
-                ring_codes = tuple(r[point1:] + r[:point1] for r in ring_codes)
-            valid[list(reading.not_dots)] = False
             ring_valid = valid[1:].reshape(n_rings, RING_POINTS)
-            complete = [r for r in range(n_rings) if np.all(ring_valid[r])]
+            if not any(np.all(ring_valid[r]) for r in range(n_rings)):
+                return None
+            return self._card(dot_image, camera, H, paper, spots, valid, 0, None, 0.0, ())
+        # Colours of the dots kept by the refit, and of those whose inner part
+        # is clean though their rim is not (an object beside them).
+        readable = valid | (spots.readable & ~spots.valid)
+        reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour,
+                            max_hidden=params.max_hidden_slots if self._codes else 1,
+                            partial=spots.partial)
+        if reading is None:
+            return None
+        valid[list(reading.not_dots)] = False
+        handed: Dict[int, bool] = {}
+
+        def mirror_safe(point1: int) -> bool:
+            """Tell whether the marks, read with point 1 in ``point1``, show no mirror."""
+            if cfg.handedness_mark is None:
+                return True
+            if point1 not in handed:
+                H_turned = H @ rotation_about_z(point1 * np.pi / 4)
+                handed[point1] = self._handed(dot_image, camera, H_turned, paper, spots, valid,
+                                              point1)
+            return handed[point1]
+
+        if reading.code is not None:
+            if not mirror_safe(reading.point1_slot):
+                return None
+            return self._card(dot_image, camera, H, paper, spots, valid, reading.point1_slot,
+                              reading.code, reading.margin, reading.ring_codes)
+        # Slots hidden by an object: the one known code that fits, else the
+        # few that the slots seen cannot tell apart, for the localizer to
+        # choose among by where its last fix puts the robot.
+        fitting, doubtful = partial_hypotheses(reading, self._codes, self._code_table,
+                                               params.decisive_margin)
+        from_map = reading.slot_letters.count('?')
+        resolved = sole_hypothesis(reading, fitting, doubtful)
+        if resolved is not None:
+            fitting, doubtful = (resolved,), ()
+        elif not fitting or len(fitting) + len(doubtful) > params.max_code_candidates:
+            return None
+        options, fits = [], 0
+        for k, (code, point1) in enumerate(fitting + doubtful):
+            if not mirror_safe(point1):
+                continue
+            turned = tuple(r[point1:] + r[:point1] for r in reading.ring_codes)
+            card = self._card(dot_image, camera, H, paper, spots, valid, point1, code,
+                              reading.margin, turned, from_map)
+            if card is not None:
+                options.append(card)
+                fits += k < len(fitting)
+        if resolved is not None:
+            return options[0] if options else None
+        if fits == 0 or len(options) < 2:
+            # One hypothesis left is not an answer: the others were dropped
+            # by their marks or codes, not ruled out by what the slots show.
+            return None
+        # Ring order unknown: in slot order, as a grey image's.
+        hidden = self._card(dot_image, camera, H, paper, spots, valid, 0, None, reading.margin,
+                            reading.ring_codes, from_map)
+        return dataclasses.replace(hidden, candidates=tuple(options))
+
+    def _card(self, dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
+              paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int,
+              code: Optional[Code], margin: float, ring_codes: Tuple[str, ...],
+              from_map: int = 0) -> Optional[CardDetection]:
+        """Return the detection with point 1 in slot ``point1`` and ``code``; None if no code."""
+        cfg = self.config
+        ids = None
+        if code is not None:
             try:
                 ids = cfg.decode(code)
             except CodeError:
                 return None
         H_final = H @ rotation_about_z(point1 * np.pi / 4)
-        if not dot_image.grey_only and cfg.handedness_mark is not None:
-            if not self._handed(dot_image, camera, H_final, paper, spots, valid, point1):
-                return None
         # Slot order -> dot order (point 1 first).
         order = self._orders[point1 % RING_POINTS]
         points = np.where(valid[order, None], spots.points[order], np.nan)
         areas = np.where(valid[order], spots.area[order], np.nan)
+        ring_valid = valid[1:].reshape(cfg.n_rings, RING_POINTS)
+        complete = [r for r in range(cfg.n_rings) if np.all(ring_valid[r])]
         ring_px = apply_h(H_final, self._outer)
         if camera is not None and camera.has_distortion:
             ring_px = camera.distort_pixels(ring_px)

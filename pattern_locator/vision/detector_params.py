@@ -41,6 +41,10 @@ class DetectorParams:
     # codes (a building map) can complete the code.
     max_hidden_slots: int = 3
     decisive_margin: float = 0.6    # a seen slot that alone tells two known codes apart
+    # Hidden slots that several known codes fill: at most this many
+    # hypotheses are handed on for the localizer to choose among; more, and
+    # the card is dropped.
+    max_code_candidates: int = 8
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -51,6 +55,9 @@ class DetectorParams:
         if not 0 <= self.max_hidden_slots <= 3:
             raise ConfigError(f'detector: max_hidden_slots must be 0..3, got '
                               f'{self.max_hidden_slots!r}')
+        if self.max_code_candidates < 0:
+            raise ConfigError(f'detector: max_code_candidates must be >= 0, got '
+                              f'{self.max_code_candidates!r}')
         if self.max_candidates < 1:
             raise ConfigError(f'detector: max_candidates must be >= 1, got '
                               f'{self.max_candidates!r}')

@@ -30,7 +30,9 @@ def draw_overlay(image: np.ndarray, detections: Sequence[CardDetection],
         if not np.isnan(ring).any():
             cv2.ellipse(canvas, cv2.fitEllipse(ring.astype(np.float32)), _ELLIPSE, 1,
                         cv2.LINE_AA)
-        label = str(det.code) if det.code is not None else 'no code (grey image)'
+        label = str(det.code) if det.code is not None else (
+            f'one of {len(det.candidates)} codes (partly hidden)' if det.candidates
+            else 'no code (grey image)')
         if det.ids is not None:
             label += f'  f{det.ids.floor} r{det.ids.room} p{det.ids.pattern}'
         u, v = det.centre_px

@@ -1,5 +1,7 @@
 """The stress benchmark's machinery on a few frames (nothing here is timed)."""
 
+import math
+
 import numpy as np
 from pattern_locator.card.pattern import load_pattern_config
 from pattern_locator.cli import main
@@ -85,3 +87,17 @@ def test_bench_options_that_conflict_are_refused_in_one_line(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and '--stress' in err[0] and '--node' in err[0]
     assert main(['bench', '--scenes', '0']) == 2
+
+
+def test_a_rate_comes_with_its_interval_and_cards_left_to_the_localizer_are_told():
+    frames = stress.make_frames(CONFIG, 10, 1, ['occlusion'])
+    assert len(frames) == 20
+    dots = [stress.Result(found=i < 17, among_candidates=17 <= i < 19, time_ms=1.0)
+            for i in range(20)]
+    row = stress.Row('occlusion', frames, dots, [stress.Result(time_ms=2.0)] * 20)
+    table = stress.stress_table({'occlusion': row})
+    assert 'occlusion: 2 more of 20 gave the card as one of the few mapped codes' in table
+    # 17 of 20: Wilson's 95 % interval is 64-95 %.
+    targets = stress.targets_table({'occlusion': row})
+    assert '85.0 % (64-95)' in targets
+    assert all(math.isnan(x) for x in stress._interval([], []))

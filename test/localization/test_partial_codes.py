@@ -5,14 +5,19 @@ The detector completes a code whose slots an object hides from the map's
 codes when exactly one fits (``vision/code_reading.resolve_partial``). A
 card missing from the map can fit a mapped code on the slots that show, so
 ``RobotLocalizer`` takes such a fix only where its last fix puts the robot
-(``gates.check_partial``). Rendered on the drive floor: an object painted
-over both dots of one ring point of a corridor card.
+(``gates.check_partial``). When several mapped codes fit the slots seen,
+the detector hands them all on (``CardDetection.candidates``) and the
+localizer takes the one that puts the robot where its last fix allows, only
+when exactly one does. Rendered on the drive floor: an object painted over
+both dots of one ring point of a corridor card.
 """
 
+import dataclasses
 import math
 
 import cv2
 import numpy as np
+from pattern_locator.localization.building import BuildingMap
 from pattern_locator.localization.gates import FixGates, GateParameters
 from pattern_locator.localization.head import HeadGeometry
 from pattern_locator.localization.localizer import RobotLocalizer
@@ -29,17 +34,10 @@ IDS = (4, 12, 3)            # the east corridor's west wall card, facing east
 BASE = yaw_pose(24.3, 10.0, math.pi, 12.0)
 
 
-@pytest.fixture(scope='module')
-def frames():
-    """Return (head pan, tilt, the clean image, the image with ring point 2 hidden)."""
-    card = WORLD.card(IDS)
-    pan, tilt = HEAD.aim_angles(BASE.inverse().apply(card.T_building_card.t[None])[0])
-    scene = FloorScene(WORLD, HEAD)
-    T_camera = scene.true_camera_pose(BASE, pan, tilt)
-    clean = scene.render_still(T_camera, CAMERA, seed=3)
+def _hide_point(clean, T_camera_card, point):
+    """Return ``clean`` with an object painted over both dots of ring ``point``."""
     pattern = WORLD.pattern
-    T_camera_card = T_camera.inverse() @ card.T_building_card
-    points = [pattern.model_points()[pattern.dot_index(r, 2)] for r in range(pattern.n_rings)]
+    points = [pattern.model_points()[pattern.dot_index(r, point)] for r in range(pattern.n_rings)]
     px = CAMERA.project(T_camera_card.apply(np.array(points)))
     radius = 2.2 * pattern.ring_dot_radius * CAMERA.fx / float(np.linalg.norm(T_camera_card.t))
     hidden = clean.copy()
@@ -49,11 +47,29 @@ def frames():
     band = np.array([a - along * radius + side, a - along * radius - side,
                      b + along * radius - side, b + along * radius + side])
     cv2.fillConvexPoly(hidden, np.round(band).astype(np.int32), (70, 80, 95))
-    return pan, tilt, clean, hidden
+    return hidden
 
 
-def localizer():
-    return RobotLocalizer(WORLD.pattern, WORLD.building, HEAD, output_frame='building',
+@pytest.fixture(scope='module')
+def scene():
+    """Return (head pan, tilt, the clean image, the card in the camera frame)."""
+    card = WORLD.card(IDS)
+    pan, tilt = HEAD.aim_angles(BASE.inverse().apply(card.T_building_card.t[None])[0])
+    scene = FloorScene(WORLD, HEAD)
+    T_camera = scene.true_camera_pose(BASE, pan, tilt)
+    clean = scene.render_still(T_camera, CAMERA, seed=3)
+    return pan, tilt, clean, T_camera.inverse() @ card.T_building_card
+
+
+@pytest.fixture(scope='module')
+def frames(scene):
+    """Return (head pan, tilt, the clean image, the image with ring point 2 hidden)."""
+    pan, tilt, clean, T_camera_card = scene
+    return pan, tilt, clean, _hide_point(clean, T_camera_card, 2)
+
+
+def localizer(building=WORLD.building):
+    return RobotLocalizer(WORLD.pattern, building, HEAD, output_frame='building',
                           gates=GateParameters(footprint='adjacent'))
 
 
@@ -91,3 +107,62 @@ def test_the_gate_refuses_a_completed_code_away_from_the_last_fix():
     far = gates.check_partial(yaw_pose(9.0, 6.3, 0.0, 12.0), cov, 'building', 1.2)
     assert far.reason == 'partial_code' and 'Mahalanobis' in far.message
     assert gates.check_partial(T, cov, 'building', None).reason == 'partial_code'
+
+
+# Point 7 (a digit of the card's number) hidden: the room's cards 1, 2 and 3
+# differ only there, so the slots seen cannot tell them apart.
+SIBLINGS = {(4, 12, 1), (4, 12, 2), (4, 12, 3)}
+
+
+def test_a_hidden_slot_that_several_mapped_codes_fill_gives_them_all(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    dets = localizer().locator.detector.detect(hidden, CAMERA)
+    assert len(dets) == 1 and dets[0].ids is None and dets[0].code is None
+    assert {c.ids.as_tuple() for c in dets[0].candidates} == SIBLINGS
+    assert all(c.slots_from_map == 1 and c.code is not None for c in dets[0].candidates)
+    # Each hypothesis is whole: its dots in its own order, point 1 first.
+    for c in dets[0].candidates:
+        assert np.allclose(c.points_px, dets[0].candidates[0].points_px, equal_nan=True)
+    # Located alone, it has no pose and says why.
+    located = localizer().locator.locate(hidden, CAMERA)
+    assert located[0].T_camera_pattern is None and '3 known codes fit' in located[0].problem
+
+
+def test_the_last_fix_chooses_the_one_that_hangs_where_the_robot_is(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    loc = localizer()
+    result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=0.0)
+    assert result.fix is None and result.rejections == ('partial_code',)
+    assert 'there is none' in result.no_fix_reason
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0).fix is None
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    for k in range(3):
+        fix = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2 + 0.1 * k).fix
+        assert fix is not None and fix.ids.as_tuple() == IDS
+        assert np.linalg.norm(fix.T_frame_base.t - BASE.t) < 0.03
+    # The hypotheses tried and left are not counted as fixes refused.
+    assert loc.rejection_counts()['partial_code'] == 1
+
+
+def test_two_that_would_both_put_the_robot_there_give_no_fix(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    # A map in which card 2 of the room hangs where card 3 does (a map
+    # error, or two cards hung one over the other).
+    building = WORLD.building
+    rooms = dict(building.rooms)
+    room = rooms[(4, 12)]
+    here = building.card(IDS)
+    cards = tuple(dataclasses.replace(c, T_room_card=here.T_room_card,
+                                      T_building_card=here.T_building_card)
+                  if c.ids.as_tuple() == (4, 12, 2) else c for c in room.cards)
+    rooms[(4, 12)] = dataclasses.replace(room, cards=cards)
+    twin = BuildingMap(building.frame, rooms, building.floor_names)
+    loc = localizer(twin)
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0).fix is None
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2)
+    assert result.fix is None and result.rejections == ('partial_code',)
+    assert '2 of the 3 mapped codes' in result.no_fix_reason

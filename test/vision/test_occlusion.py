@@ -17,7 +17,8 @@ from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
                                         MirroredTexture, Occluder, render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel
-from pattern_locator.vision.code_reading import code_table, Reading, resolve_partial
+from pattern_locator.vision.code_reading import (code_table, partial_hypotheses, Reading,
+                                                 resolve_partial)
 from pattern_locator.vision.detector import Detector, DetectorParams
 import pytest
 
@@ -160,3 +161,17 @@ def test_resolve_partial_takes_only_a_unique_answer_with_no_near_rival():
     assert resolve_partial(reading('BGKRGRB?', 'R', 0.7), rival, code_table(rival), 0.6) == \
         (Code.parse('R-KRGRBRBG'), 2)
     assert resolve_partial(reading('BGKRGRB?', 'R', 0.7), rival, code_table(rival)) is None
+
+
+def test_partial_hypotheses_are_the_codes_that_fit_and_those_one_weak_slot_away():
+    codes = sorted({Code.parse(t) for t in ('R-KRGRBRBG', 'R-KRGRBGBG', 'G-KRGRBRBG',
+                                            'G-KBBBBBBB')}, key=str)
+    table = code_table(codes)
+    # Slot 7 (point 6) hidden: the two R-KRGRB?BG codes fit; the G centre's
+    # code is one seen slot (the centre) away, in doubt below the decisive margin.
+    fitting, doubtful = partial_hypotheses(reading('BGKRGRB?', 'R', 0.5), codes, table, 0.6)
+    assert set(fitting) == {(Code.parse('R-KRGRBRBG'), 2), (Code.parse('R-KRGRBGBG'), 2)}
+    assert doubtful == ((Code.parse('G-KRGRBRBG'), 2),)
+    fitting, doubtful = partial_hypotheses(reading('BGKRGRB?', 'R', 0.7), codes, table, 0.6)
+    assert len(fitting) == 2 and doubtful == ()
+    assert partial_hypotheses(reading('', 'R'), codes, table) == ((), ())

@@ -101,3 +101,18 @@ def test_a_rate_comes_with_its_interval_and_cards_left_to_the_localizer_are_told
     targets = stress.targets_table({'occlusion': row})
     assert '85.0 % (64-95)' in targets
     assert all(math.isnan(x) for x in stress._interval([], []))
+
+
+def test_occlusion_while_following_counts_fixes_and_never_a_wrong_one():
+    from pattern_locator.evaluation import stress_follow
+
+    counts = stress_follow.run_follow(per_card=1, seed=2, max_cards=6)
+    assert 3 <= counts.views <= 6 and counts.wrong == 0
+    assert counts.single <= counts.views and 1 <= counts.fixes <= counts.views
+    table = stress_follow.follow_table(counts)
+    assert 'following: fix %' in table and f'{counts.views:>6}' in table
+    frames = stress.make_frames(CONFIG, 10, 1, ['occlusion'])
+    row = stress.Row('occlusion', frames, [stress.Result(time_ms=1.0)] * 20,
+                     [stress.Result(time_ms=2.0)] * 20)
+    targets = stress.targets_table({'occlusion': row}, counts)
+    assert 'following the card (localizer, last fix)' in targets

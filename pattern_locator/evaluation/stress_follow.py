@@ -43,7 +43,7 @@ class FollowCounts:
     fixes: int = 0              # the localizer gave a right fix
     fixes_other_card: int = 0   # of ``fixes``, from another card in the image
     wrong: int = 0              # a fix from a card not in the image, or far off (see above)
-    errors_m: List[float] = field(default_factory=list)    # position error of each fix
+    errors_m: List[float] = field(default_factory=list, repr=False)   # of each fix
 
 
 def run_follow(per_card: int = 2, seed: int = 1, max_cards: Optional[int] = None

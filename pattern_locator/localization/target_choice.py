@@ -267,7 +267,8 @@ def seen_cards(result, camera: CameraModel, building: BuildingMap
 
     ``result``: a ``localizer.FrameResult``. A card's centre comes from its
     pose when the fix used it (``fix.T_camera_card``), else from its plane
-    homography; ``ids`` only for cards in ``building``. Cards whose centre
+    homography; ``ids`` only for cards in ``building`` (a partly hidden
+    card's, when the fix took one of its candidates). Cards whose centre
     is not a finite point in front of the camera are left out; the flag
     says whether the biggest card was (a problem to report).
     """
@@ -275,6 +276,10 @@ def seen_cards(result, camera: CameraModel, building: BuildingMap
     biggest_lost = False
     fix = result.fix
     for k, det in enumerate(result.detections):
+        if fix is not None and det.ids is None:
+            # A partly hidden card: the fix names the one of its candidates it took.
+            det = next((c for c in det.candidates
+                        if c.ids == fix.ids and c.size_px == fix.size_px), det)
         if fix is not None and fix.ids == det.ids and fix.size_px == det.size_px:
             point = np.asarray(fix.T_camera_card.t, dtype=float)
         else:

@@ -21,6 +21,7 @@ from pattern_locator.localization.building import BuildingMap
 from pattern_locator.localization.gates import FixGates, GateParameters
 from pattern_locator.localization.head import HeadGeometry
 from pattern_locator.localization.localizer import RobotLocalizer
+from pattern_locator.localization.target_choice import seen_cards
 from pattern_locator.sim.drive import yaw_pose
 from pattern_locator.sim.floor_file import load_floor_world
 from pattern_locator.sim.floor_scene import FloorScene
@@ -166,3 +167,17 @@ def test_two_that_would_both_put_the_robot_there_give_no_fix(scene):
     result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2)
     assert result.fix is None and result.rejections == ('partial_code',)
     assert '2 of the 3 mapped codes' in result.no_fix_reason
+
+
+def test_the_head_keeps_following_the_card_it_chose(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    loc = localizer()
+    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
+    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1)
+    result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2)
+    assert result.fix is not None and result.detections[0].ids is None
+    # The target chooser names the card the fix took, where the card is.
+    seen, lost = seen_cards(result, CAMERA, WORLD.building)
+    assert not lost and seen[0].ids == IDS
+    assert np.linalg.norm(np.array(seen[0].centre) - T_camera_card.t) < 0.05

@@ -236,7 +236,9 @@ class FixGates:
         ``counted=False``: a hypothesis tried, not a fix refused; not counted.
         """
         rejection = self._static(T_frame_base, covariance, frame_id, room, T_camera_card)
-        return None if rejection is None or not counted else self.count(rejection)
+        if rejection is not None and counted:
+            self.count(rejection)
+        return rejection
 
     def _static(self, T_frame_base: Pose, covariance: Optional[np.ndarray], frame_id: str,
                 room: Optional[Room], T_camera_card: Optional[Pose]) -> Optional[Rejection]:

@@ -228,43 +228,53 @@ class RobotLocalizer:
         Return the fix of the one hypothesis of a partly hidden card that fits the last fix.
 
         The slots an object hides leave several mapped codes (``det.candidates``,
-        each with its own point 1). Each is located and put through the static
-        gates and the jump test against the last fix, none of them counted; the
-        card gives a fix only when exactly one passes. Cards that share the
-        slots seen hang in other places (a room's other cards, the same card
-        number on the next floor), so at most one of them puts the robot where
-        it can be; with no last fix to judge by there is no answer.
+        each with its own point 1). Each is located and its fix measured
+        against where the last fix puts the robot (the jump test), nothing
+        counted. The card gives a fix only when exactly one hypothesis is
+        within the jump limit and it passes the static gates; every other must
+        be shown to be elsewhere, so one that has no pose, or a gate refuses
+        (it may still be where the robot is), blocks the answer. Cards that
+        share the slots seen hang in other places (a room's other cards, the
+        next floor's card of the same number, a turn of the card's own code),
+        so at most one of them puts the robot where it can be; with no last
+        fix there is nothing to judge by.
         """
         label = f'card with {det.slots_from_map} slot(s) hidden'
-        passing: List[RobotFix] = []
+        limit = self.gates.parameters.max_jump_mahalanobis
+        near: List[Tuple[Optional[RobotFix], bool]] = []
         for option in det.candidates:
             try:
                 mapped = self.building.card(option.ids)
             except CodeError:
-                continue
+                continue           # not in this map (the detector's codes are the map's)
             prior = self._prior(mapped, T_base_camera, motion.pan, motion.tilt)
             located = self.locator.pose_of(option, camera, prior)
-            if located.T_camera_pattern is None or (
-                    located.reprojection_rms_px is not None
-                    and located.reprojection_rms_px > self.max_reprojection_px):
+            if located.T_camera_pattern is None:
+                near.append((None, False))      # not shown to be elsewhere
                 continue
             fix, rejection = self._fix(option, mapped, located, camera, motion, twist,
                                        counted=False)
-            if rejection is not None:
-                continue
-            distance = self.gates.distance_from_last(fix.T_frame_base, fix.covariance,
+            usable = rejection is None and not (
+                located.reprojection_rms_px is not None
+                and located.reprojection_rms_px > self.max_reprojection_px)
+            covariance = fix.covariance
+            if covariance is None or np.shape(covariance) != (6, 6) or \
+                    not np.all(np.isfinite(covariance)):
+                covariance = np.zeros((6, 6))   # the jump test's floors alone
+            distance = self.gates.distance_from_last(fix.T_frame_base, covariance,
                                                      fix.frame_id, stamp_s, odometry)
             if distance is None:
                 return None, self.gates.count(Rejection(
                     'partial_code', f'{label}: {len(det.candidates)} mapped codes fit the '
                     'slots seen; chosen only by a last fix, and there is none'))
-            if distance <= self.gates.parameters.max_jump_mahalanobis:
-                passing.append(fix)
-        if len(passing) == 1:
-            return passing[0], None
+            if not distance > limit:            # NaN: not shown to be elsewhere
+                near.append((fix, usable))
+        if len(near) == 1 and near[0][1]:
+            return near[0][0], None
         return None, self.gates.count(Rejection(
-            'partial_code', f'{label}: {len(passing)} of the {len(det.candidates)} mapped codes '
-            'that fit the slots seen put the robot where its last fix allows (one needed)'))
+            'partial_code', f'{label}: {len(near)} of the {len(det.candidates)} mapped codes '
+            'that fit the slots seen may be where its last fix puts the robot (one needed, '
+            'passing the gates)'))
 
     def _room(self, fix: RobotFix):
         """Return the room of the card a fix came from."""
@@ -292,7 +302,7 @@ class RobotLocalizer:
     def _fix(self, det, mapped: MappedCard, located, camera: CameraModel, motion: HeadMotion,
              twist: Optional[BaseTwist], counted: bool = True
              ) -> Tuple[Optional[RobotFix], Optional[Rejection]]:
-        """Return the base's fix from one card and why the gates refuse it (or None)."""
+        """Return the base's fix from one card and why the gates refuse it (or None: use it)."""
         pan, tilt = motion.pan, motion.tilt
         T_camera_card = located.T_camera_pattern
         if self.output_frame == 'room':
@@ -320,12 +330,12 @@ class RobotLocalizer:
         room = self.building.room(mapped.ids.floor, mapped.ids.room)
         rejection = self.gates.check(T_frame_base, covariance, frame_id, room, T_camera_card,
                                      counted)
-        if rejection is not None:
-            return None, rejection
         pan_to, tilt_to = _head_motion_from_pose(T_camera_card)
+        # Returned with its rejection too: a hypothesis refused by a gate may
+        # still be where the robot is (_choose).
         return RobotFix(det.ids, frame_id, T_frame_base, covariance, T_camera_card, pan_to,
                         tilt_to, det.size_px, float(located.ambiguity or math.inf), 1,
-                        terms), None
+                        terms), rejection
 
 
 def _head_motion(camera: CameraModel, centre_px: np.ndarray) -> Tuple[float, float]:

@@ -26,6 +26,7 @@ from pattern_locator.sim.drive import yaw_pose
 from pattern_locator.sim.floor_file import load_floor_world
 from pattern_locator.sim.floor_scene import FloorScene
 from pattern_locator.vision.camera import CameraModel
+from pattern_locator.vision.geometry import Pose, rodrigues
 import pytest
 
 WORLD = load_floor_world()
@@ -181,3 +182,30 @@ def test_the_head_keeps_following_the_card_it_chose(scene):
     seen, lost = seen_cards(result, CAMERA, WORLD.building)
     assert not lost and seen[0].ids == IDS
     assert np.linalg.norm(np.array(seen[0].centre) - T_camera_card.t) < 0.05
+
+
+def test_the_one_that_fits_must_pass_the_gates_too(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    loc = localizer()
+    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    # A gate that refuses the card where it is: the one hypothesis where the
+    # robot is may not be taken, and the others are elsewhere.
+    loc.gates.parameters = dataclasses.replace(loc.gates.parameters, max_camera_distance_m=1.0)
+    result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2)
+    assert result.fix is None and result.rejections == ('partial_code',)
+    assert '1 of the 3 mapped codes' in result.no_fix_reason
+
+
+def test_a_hypothesis_tried_is_judged_by_the_gates_but_not_counted():
+    gates = FixGates(WORLD.building, GateParameters(footprint='off'))
+    cov = np.diag([1e-4] * 6)
+    level = yaw_pose(5.0, 6.3, 0.0, 12.0)
+    tipped = Pose(rodrigues(np.array([math.radians(30.0), 0.0, 0.0])), level.t)
+    assert gates.check(tipped, cov, 'building', counted=False).reason == 'roll_pitch'
+    assert gates.counts()['roll_pitch'] == 0
+    assert gates.check(tipped, cov, 'building').reason == 'roll_pitch'
+    assert gates.counts()['roll_pitch'] == 1
+    assert gates.check(level, cov, 'building', counted=False) is None
+    assert gates.distance_from_last(level, cov, 'building', 1.0) is None   # no last fix

@@ -12,6 +12,7 @@ Rendered images with exact ground truth; nothing is timed.
 
 import math
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
@@ -175,3 +176,35 @@ def test_partial_hypotheses_are_the_codes_that_fit_and_those_one_weak_slot_away(
     fitting, doubtful = partial_hypotheses(reading('BGKRGRB?', 'R', 0.7), codes, table, 0.6)
     assert len(fitting) == 2 and doubtful == ()
     assert partial_hypotheses(reading('', 'R'), codes, table) == ((), ())
+
+
+@st.composite
+def codes_and_reading(draw):
+    """Draw known codes, one of them the card's, and its reading with some slots hidden."""
+    rings = draw(st.lists(st.text('RGB', min_size=7, max_size=7), min_size=1, max_size=12))
+    centres = draw(st.lists(st.sampled_from('KRGB'), min_size=len(rings), max_size=len(rings)))
+    codes = sorted({Code.parse(f'{c}-K{r}') for c, r in zip(centres, rings)}, key=str)
+    card = draw(st.sampled_from(codes))
+    point1 = draw(st.integers(0, 7))
+    slots = [card.ring[(k - point1) % 8] for k in range(8)]
+    hidden = draw(st.sets(st.integers(0, 7), min_size=1, max_size=3))
+    letters = ''.join('?' if k in hidden else c for k, c in enumerate(slots))
+    margin = draw(st.sampled_from([0.4, 0.7, 0.95]))
+    return codes, card, point1, reading(letters, card.centre, margin)
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, database=None)
+@given(codes_and_reading())
+def test_partial_hypotheses_hold_the_truth_and_a_sole_answer_has_no_rival(drawn):
+    codes, card, point1, read = drawn
+    table = code_table(codes)
+    fitting, doubtful = partial_hypotheses(read, codes, table, 0.6)
+    # The card itself in its own turn always fits what its own slots show.
+    assert (card, point1) in fitting
+    seen = read.slot_letters + read.centre_letter
+    for code, p in fitting:
+        shown = ''.join(code.ring[(k - p) % 8] for k in range(8)) + code.centre
+        assert all(a == '?' or a == b for a, b in zip(seen, shown))
+    answer = resolve_partial(read, codes, table, 0.6)
+    if answer is not None:
+        assert answer == (card, point1) and fitting == ((card, point1),) and doubtful == ()

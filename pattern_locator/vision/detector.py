@@ -109,9 +109,10 @@ class Detector:
         (:func:`~.code_reading.resolve_partial`). When 2 to
         ``params.max_code_candidates`` known codes remain
         (:func:`~.code_reading.partial_hypotheses`), the card comes with no
-        code and those as its ``candidates``, for a localizer to choose among
-        by where the robot is. Without known codes, only a hidden point 1 is
-        completed (the one black slot, when seven coloured ones are seen).
+        code and those the handedness marks allow as its ``candidates``, for
+        a localizer to choose among by where the robot is. Without known
+        codes, only a hidden point 1 is completed (the one black slot, when
+        seven coloured ones are seen).
         """
         self.config = config
         self.params = params
@@ -355,10 +356,12 @@ class Detector:
                 fits += k < len(fitting)
         if resolved is not None:
             return options[0] if options else None
-        if fits == 0 or len(options) < 2:
-            # One hypothesis left is not an answer: the others were dropped
-            # by their marks or codes, not ruled out by what the slots show.
+        if fits == 0:
             return None
+        # One left is still no id: the marks that dropped the others (each
+        # with point 1 in another slot) may only have been hidden. But those
+        # would turn the card by 45 degrees or more, which the localizer's
+        # gates tell, so it goes on as the one candidate.
         # Ring order unknown: in slot order, as a grey image's.
         hidden = self._card(dot_image, camera, H, paper, spots, valid, 0, None, reading.margin,
                             reading.ring_codes, from_map)

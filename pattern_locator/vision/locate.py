@@ -74,9 +74,10 @@ class CardLocator:
     def pose_of(self, card: CardDetection, camera: CameraModel,
                 prior: Optional[PosePrior] = None) -> LocatedCard:
         if card.code is None and card.candidates:
-            return _no_pose(card, self.estimator, f'code partly hidden: {len(card.candidates)} '
-                            'known codes fit the slots seen (a localizer chooses by its last '
-                            'fix)')
+            n = len(card.candidates)
+            return _no_pose(card, self.estimator, f'code partly hidden: {n} known '
+                            f'code{"s" if n > 1 else ""} fit the slots seen (a localizer '
+                            'chooses by its last fix)')
         if card.code is None:
             return _no_pose(card, self.estimator, 'grey image: no code, so no pose')
         try:

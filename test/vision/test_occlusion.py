@@ -90,6 +90,10 @@ def test_slot_hidden_in_both_rings_is_read_from_the_map_only_when_certain():
     twin = one_slot_away(CODE, 6)[0]
     ambiguous = Detector(CFG, known_codes=[CODE, twin] + others)
     assert ids_of(image, ambiguous) == []
+    # Both are handed on, for a localizer's last fix to choose between.
+    (card,) = ambiguous.detect(image, VGA)
+    assert card.code is None and {c.code for c in card.candidates} == {CODE, twin}
+    assert all(c.slots_from_map == 1 for c in card.candidates)
 
 
 def test_a_known_code_one_seen_slot_away_blocks_the_answer():
@@ -208,3 +212,19 @@ def test_partial_hypotheses_hold_the_truth_and_a_sole_answer_has_no_rival(drawn)
     answer = resolve_partial(read, codes, table, 0.6)
     if answer is not None:
         assert answer == (card, point1) and fitting == ((card, point1),) and doubtful == ()
+
+
+def test_a_turn_the_marks_rule_out_leaves_one_candidate_not_an_id():
+    # Points 1 and 8 hidden: the card with point 1 in slot 0 fits, and so
+    # does a mapped code whose point 1 would be in slot 7. The marks show
+    # the first turn only; they may just have been hidden for the second,
+    # so the card is one candidate (for the localizer), never an id.
+    rival = Code('R', 'KBRGRBRB')
+    texture = DotCardTexture(CFG, CODE)
+    bands = tuple(Occluder(0, slot_band(point), (0.35, 0.3, 0.28)) for point in (1, 8))
+    image = render_scene(VGA, [CardPlacement(POSES[0], texture)],
+                         RenderOptions(occluders=bands, noise_sigma=1.5, seed=0)).image
+    mapped = Detector(CFG, known_codes=[CODE, rival])
+    (card,) = mapped.detect(image, VGA)
+    assert card.ids is None and [c.code for c in card.candidates] == [CODE]
+    assert card.candidates[0].ids.as_tuple() == IDS

@@ -601,8 +601,9 @@ def targets_table(rows: Dict[str, Row], follow=None) -> str:
         low, high = _interval(row.dots, row.frames)
         add(text, f'{rate:.1f} % ({low:.0f}-{high:.0f})', rate >= limit)
         if text.startswith('>= 80 %') and follow is not None and follow.views:
-            rate = 100.0 * follow.fixes / follow.views
-            low, high = wilson_interval(follow.fixes, follow.views)
+            # Fixes from the hidden card itself, not from others in the image.
+            rate = 100.0 * follow.fixes_of_card / follow.views
+            low, high = wilson_interval(follow.fixes_of_card, follow.views)
             add('   the same, following the card (localizer, last fix)',
                 f'{rate:.1f} % ({low:.0f}-{high:.0f})', rate >= limit and follow.wrong == 0)
     if 'far' in rows and rows['far'].april_d1:

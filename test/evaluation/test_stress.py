@@ -109,6 +109,7 @@ def test_occlusion_while_following_counts_fixes_and_never_a_wrong_one():
     counts = stress_follow.run_follow(per_card=1, seed=2, max_cards=6)
     assert 3 <= counts.views <= 6 and counts.wrong == 0
     assert counts.single <= counts.views and 1 <= counts.fixes <= counts.views
+    assert counts.fixes_of_card <= counts.fixes
     table = stress_follow.follow_table(counts)
     assert 'following: fix %' in table and f'{counts.views:>6}' in table
     frames = stress.make_frames(CONFIG, 10, 1, ['occlusion'])

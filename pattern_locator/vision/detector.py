@@ -15,7 +15,9 @@ Four stages, one module each:
 4. **Order and code** (:mod:`.code_reading`): colours against the card's own
    white, point 1 (the black slot), the code, both rings agreeing; the
    handedness marks where the card carries them, so a mirror image never
-   gives an id.
+   gives an id. Slots an object hides are filled from the known codes (a
+   building map's) when one fits, else the few that fit are handed on as
+   ``candidates`` for a localizer to choose among.
 
 Nothing here grows faster than the pixels plus a fixed number of candidates:
 bounded time and memory on any image.
@@ -361,8 +363,8 @@ class Detector:
         # One left is still no id: the marks that dropped the others (each
         # with point 1 in another slot) may only have been hidden. But those
         # would turn the card by 45 degrees or more, which the localizer's
-        # gates tell, so it goes on as the one candidate.
-        # Ring order unknown: in slot order, as a grey image's.
+        # gates tell, so it goes on as the one candidate. The card itself:
+        # ring order unknown, in slot order as a grey image's.
         hidden = self._card(dot_image, camera, H, paper, spots, valid, 0, None, reading.margin,
                             reading.ring_codes, from_map)
         return dataclasses.replace(hidden, candidates=tuple(options))
@@ -371,7 +373,7 @@ class Detector:
               paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int,
               code: Optional[Code], margin: float, ring_codes: Tuple[str, ...],
               from_map: int = 0) -> Optional[CardDetection]:
-        """Return the detection with point 1 in slot ``point1`` and ``code``; None if no code."""
+        """Return the detection with point 1 in slot ``point1`` and ``code``; None if not a code."""
         cfg = self.config
         ids = None
         if code is not None:

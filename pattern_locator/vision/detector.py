@@ -373,7 +373,7 @@ class Detector:
               paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int,
               code: Optional[Code], margin: float, ring_codes: Tuple[str, ...],
               from_map: int = 0) -> Optional[CardDetection]:
-        """Return the detection with point 1 in slot ``point1`` and ``code`` (None: no code)."""
+        """Return the detection with ``code``, point 1 in slot ``point1``; None if undecodable."""
         cfg = self.config
         ids = None
         if code is not None:

@@ -50,8 +50,9 @@ REASONS = (
     'outside_footprint',         # base outside its room (plus margin) or the building
     'jump',                      # not continuous with the last fix: held until confirmed
     'unconfirmed_first',         # the first fix (or the first after a reset): held likewise
-    'partial_code',              # a card partly hidden, its code completed from the map,
-                                 # not where the last fix puts the robot (or no last fix)
+    'partial_code',              # a card partly hidden, its code completed from the map
+                                 # (or one of several codes that fit), not where the last
+                                 # fix puts the robot, or no last fix to choose by
 )
 FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
 # Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.

@@ -43,7 +43,7 @@ import functools
 import math
 import re
 import time
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -55,6 +55,9 @@ from ..sim.render import (_in_polygon, BitmapCardTexture, card_pose_facing, Card
                           DotCardTexture, MirroredTexture, Occluder, render_scene, RenderOptions)
 from ..vision.camera import CameraModel
 from ..vision.locate import CardLocator
+
+if TYPE_CHECKING:      # stress_follow imports this module
+    from .stress_follow import FollowCounts
 
 # Lights as (R, G, B) gains relative to white light.
 LIGHTS = (
@@ -557,7 +560,7 @@ def _conditions_matching(rows: Dict[str, Row], prefix: str) -> Row:
     return merged
 
 
-def targets_table(rows: Dict[str, Row], follow=None) -> str:
+def targets_table(rows: Dict[str, Row], follow: Optional['FollowCounts'] = None) -> str:
     """
     Issue 9's targets, each with the figure measured here and met / not met.
 

@@ -63,6 +63,10 @@ def run_follow(per_card: int = 2, seed: int = 1, max_cards: Optional[int] = None
     scene = FloorScene(world, head)
     rng = np.random.default_rng([seed, 11])
     counts = FollowCounts()
+    # One localizer, started afresh for every view (its map's tables are
+    # made once).
+    localizer = RobotLocalizer(world.pattern, world.building, head, output_frame='building',
+                               gates=GateParameters(footprint='adjacent'))
     for card in world.cards[:max_cards]:
         T_card = card.T_building_card
         normal, right = T_card.R[:, 2], T_card.R[:, 0]
@@ -81,9 +85,7 @@ def run_follow(per_card: int = 2, seed: int = 1, max_cards: Optional[int] = None
             clean = scene.render_still(T_camera, camera, seed=int(rng.integers(1 << 30)))
             hidden = _paint_occluder(clean, T_camera.inverse() @ T_card, camera, world.pattern,
                                      rng)
-            localizer = RobotLocalizer(world.pattern, world.building, head,
-                                       output_frame='building',
-                                       gates=GateParameters(footprint='adjacent'))
+            localizer.reset()
             localizer.process(clean, camera, pan, tilt, stamp_s=1.0)
             if localizer.process(clean, camera, pan, tilt, stamp_s=1.1).fix is None:
                 counts.not_located += 1

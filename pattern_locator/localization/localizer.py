@@ -177,8 +177,7 @@ class RobotLocalizer:
             if located.T_camera_pattern is None:
                 problems.append(f'card {det.code}: {located.problem}')
                 continue
-            if located.reprojection_rms_px is not None and (
-                    located.reprojection_rms_px > self.max_reprojection_px):
+            if self._too_rough(located):
                 problems.append(f'card {det.code}: reprojection error '
                                 f'{located.reprojection_rms_px:.2f} px above the limit '
                                 f'{self.max_reprojection_px:.2f} px')
@@ -254,9 +253,7 @@ class RobotLocalizer:
                 continue
             fix, rejection = self._fix(option, mapped, located, camera, motion, twist,
                                        counted=False)
-            usable = rejection is None and not (
-                located.reprojection_rms_px is not None
-                and located.reprojection_rms_px > self.max_reprojection_px)
+            usable = rejection is None and not self._too_rough(located)
             covariance = fix.covariance
             if covariance is None or np.shape(covariance) != (6, 6) or \
                     not np.all(np.isfinite(covariance)):
@@ -275,6 +272,11 @@ class RobotLocalizer:
             'partial_code', f'{label}: {len(near)} of the {len(det.candidates)} mapped codes '
             'that fit the slots seen may be where its last fix puts the robot (one needed, '
             'passing the gates)'))
+
+    def _too_rough(self, located) -> bool:
+        """Tell whether a located card's reprojection error is above the limit."""
+        return located.reprojection_rms_px is not None and (
+            located.reprojection_rms_px > self.max_reprojection_px)
 
     def _room(self, fix: RobotFix):
         """Return the room of the card a fix came from."""

@@ -110,6 +110,11 @@ class GateParameters:
     # A stamp this much older than the last fix's means the clock jumped back
     # (a bag replayed again): continuity starts over.
     clock_jump_back_s: float = 1.0
+    # A partly hidden card's code comes from the map only within this long of
+    # the last fix: the jump test lets the base go max_speed_m_s times the
+    # time since, and a card missing from the map that reads as a mapped one
+    # hanging elsewhere must not fall within that.
+    partial_code_max_age_s: float = 1.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -391,7 +396,8 @@ class FixGates:
         if distance is None:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map; '
-                'taken only to follow a robot already located'))
+                'taken only to follow a robot located in the last '
+                f'{self.parameters.partial_code_max_age_s:g} s'))
         if distance > self.parameters.max_jump_mahalanobis:
             return self.count(Rejection(
                 'partial_code', f'{label}: code partly hidden and completed from the map, '
@@ -404,12 +410,15 @@ class FixGates:
         """
         Return how far (Mahalanobis) a fix is from where the last fix puts the robot.
 
-        None when that cannot be judged: no last fix, no stamp, or the
-        continuity gate off. Nothing is counted or remembered.
+        For a partly hidden card's code: None when that cannot be judged (no
+        last fix, no stamp, the continuity gate off) or the last fix is more
+        than ``partial_code_max_age_s`` older. Nothing is counted or
+        remembered.
         """
         fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
         last = self._accepted
-        if fix is None or last is None:
+        if fix is None or last is None or (
+                not fix.stamp - last.stamp <= self.parameters.partial_code_max_age_s):
             return None
         return self._distance(last, fix, odometry)
 

@@ -263,7 +263,8 @@ class RobotLocalizer:
             if distance is None:
                 return None, self.gates.count(Rejection(
                     'partial_code', f'{label}: {len(det.candidates)} mapped codes fit the '
-                    'slots seen; chosen only by a last fix, and there is none'))
+                    'slots seen; chosen only by a last fix of the last '
+                    f'{self.gates.parameters.partial_code_max_age_s:g} s, and there is none'))
             if not distance > limit:            # NaN: not shown to be elsewhere
                 near.append((fix, usable))
         if len(near) == 1 and near[0][1]:

@@ -195,6 +195,8 @@ _GATE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
                           None),
     'clock_jump_back_s': ('stamps going back more than this restart continuity (s)', 0.0,
                           3600.0),
+    'partial_code_max_age_s': ("a partly hidden card's code is taken from the map only this "
+                               'soon after the last fix (s)', 0.0, 60.0),
 }
 
 

@@ -111,6 +111,42 @@ def test_the_gate_refuses_a_completed_code_away_from_the_last_fix():
     assert gates.check_partial(T, cov, 'building', None).reason == 'partial_code'
 
 
+def test_a_completed_code_is_taken_only_soon_after_the_last_fix():
+    # A card missing from the map, partly hidden, can read as a mapped card
+    # that hangs metres away. Without odometry the jump test lets the base
+    # go max_speed_m_s (1 m/s) times the time since the last fix, so after a
+    # few seconds that card would pass as "where the robot can be".
+    gates = FixGates(WORLD.building, GateParameters(footprint='off'))
+    cov = np.diag([1e-4] * 3 + [1e-4] * 3)
+    gates.check_continuity(yaw_pose(5.0, 6.3, 0.0, 12.0), cov, 'building', 1.0)
+    assert gates.check_continuity(yaw_pose(5.0, 6.3, 0.0, 12.0), cov, 'building', 1.1) is None
+    three_m_away = yaw_pose(8.0, 6.3, 0.0, 12.0)
+    late = gates.check_partial(three_m_away, cov, 'building', 5.1)
+    assert late is not None and late.reason == 'partial_code' and 'last 1 s' in late.message
+    # The jump test alone (a long limit) would have taken it.
+    lenient = FixGates(WORLD.building, GateParameters(footprint='off',
+                                                      partial_code_max_age_s=60.0))
+    lenient.check_continuity(yaw_pose(5.0, 6.3, 0.0, 12.0), cov, 'building', 1.0)
+    lenient.check_continuity(yaw_pose(5.0, 6.3, 0.0, 12.0), cov, 'building', 1.1)
+    assert lenient.check_partial(three_m_away, cov, 'building', 5.1) is None
+    # Soon after, where the robot is: taken.
+    assert gates.check_partial(yaw_pose(5.01, 6.3, 0.0, 12.0), cov, 'building', 2.0) is None
+
+
+def test_a_hidden_card_seen_long_after_the_last_fix_gives_no_fix(scene):
+    pan, tilt, clean, T_camera_card = scene
+    hidden = _hide_point(clean, T_camera_card, 7)
+    loc = localizer()
+    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=3.0)
+    assert result.fix is None and result.rejections == ('partial_code',)
+    assert 'last 1 s' in result.no_fix_reason
+    # Following again: a clean image, then the hidden card within the second.
+    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=3.1).fix is not None
+    assert loc.process(hidden, CAMERA, pan, tilt, stamp_s=3.2).fix is not None
+
+
 # Point 7 (a digit of the card's number) hidden: the room's cards 1, 2 and 3
 # differ only there, so the slots seen cannot tell them apart.
 SIBLINGS = {(4, 12, 1), (4, 12, 2), (4, 12, 3)}

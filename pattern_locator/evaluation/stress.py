@@ -27,7 +27,11 @@ The conditions (all procedural, nothing downloaded):
 * ``blur``: motion blur of 3-7 px;
 * ``occlusion``: an object in front of 10-30 % of the card;
 * ``interlace``: both fields of a panning camera (2-10 px apart);
-* ``far``: 5.5-8 m.
+* ``far``: 5.5-8 m;
+* ``yuv422`` and ``bayer``: what a frame grabber or a raw sensor sends, the
+  ordinary frames encoded as YUV 4:2:2 (chroma halved along the rows) or as
+  a Bayer mosaic (one channel a pixel) and decoded by the locator node's own
+  decoder (:mod:`..nodes.image_codec`).
 
 Cards are at 1.25-4 m unless the condition says otherwise, tilted up to 60
 degrees, anywhere in the image. Our locator is given a building map per
@@ -51,6 +55,7 @@ import numpy as np
 from .baselines import AprilTagLocator, tag_card_bitmap
 from .bench import bench_cameras, time_stats
 from ..card.pattern import Code, Ids, PatternConfig
+from ..nodes.image_codec import decode_image, encode_image
 from ..sim.render import (_in_polygon, BitmapCardTexture, card_pose_facing, CardPlacement,
                           DotCardTexture, MirroredTexture, Occluder, render_scene, RenderOptions)
 from ..vision.camera import CameraModel
@@ -94,6 +99,7 @@ class Frame:
     tag_id: int
     mirror_contrast: Optional[float] = None     # a mirror image (1 = a real mirror)
     expected: bool = True                       # False: no id may be read here
+    encoding: Optional[str] = None              # sent as this sensor_msgs encoding
 
 
 @dataclass
@@ -257,10 +263,20 @@ def _condition_makers() -> Dict[str, Callable]:
     def far(rng, config):
         return {'distance': float(rng.uniform(5.5, 8.0))}, _imaging(rng)
 
+    # Raw formats are not compressed.
+    def yuv422(rng, config):
+        return {'encoding': str(rng.choice(['yuv422', 'yuv422_yuy2']))}, _imaging(
+            rng, jpeg_quality=None)
+
+    def bayer(rng, config):
+        pattern = str(rng.choice(['bayer_rggb8', 'bayer_bggr8', 'bayer_gbrg8', 'bayer_grbg8']))
+        return {'encoding': pattern}, _imaging(rng, jpeg_quality=None)
+
     makers = {'plain': plain, 'textures': textures, 'dark noisy': dark, 'photos': photos}
     makers.update({f'light {name}': light(gains) for name, gains in LIGHTS})
     makers.update({'chromatic': chromatic, 'mirror': mirror, 'dim': dim, 'blur': blur,
-                   'occlusion': occlusion, 'interlace': interlace, 'far': far})
+                   'occlusion': occlusion, 'interlace': interlace, 'far': far,
+                   'yuv422': yuv422, 'bayer': bayer})
     return makers
 
 
@@ -334,7 +350,10 @@ def render_frame(frame: Frame, camera: CameraModel, config: PatternConfig,
                                     config.card_size)
     if frame.mirror_contrast is not None:
         texture = MirroredTexture(texture, frame.mirror_contrast)
-    return render_scene(camera, [CardPlacement(T, texture)], frame.options).image
+    image = render_scene(camera, [CardPlacement(T, texture)], frame.options).image
+    if frame.encoding is not None:
+        image = decode_image(*encode_image(image, frame.encoding))
+    return image
 
 
 # Measuring --------------------------------------------------------------------------

@@ -47,7 +47,9 @@ _BYTES_PER_PIXEL: Dict[str, int] = {
 
 SUPPORTED_ENCODINGS: Tuple[str, ...] = tuple(_BYTES_PER_PIXEL)
 
-ENCODE_ENCODINGS: Tuple[str, ...] = ('bgr8', 'rgb8', 'mono8', 'mono16')
+ENCODE_ENCODINGS: Tuple[str, ...] = ('bgr8', 'rgb8', 'mono8', 'mono16', 'yuv422',
+                                     'yuv422_yuy2', 'bayer_rggb8', 'bayer_bggr8',
+                                     'bayer_gbrg8', 'bayer_grbg8')
 
 # ROS names the Bayer pattern by its top-left 2x2 block read row by row
 # (bayer_rggb8: R G / G B). OpenCV's legacy names follow the second row's
@@ -65,6 +67,21 @@ _BAYER_CODES: Dict[str, int] = {
 _YUV_CODES: Dict[str, int] = {
     'yuv422': cv2.COLOR_YUV2BGR_UYVY,
     'yuv422_yuy2': cv2.COLOR_YUV2BGR_YUY2,
+}
+
+# The other way, for a camera that sends them (the stress bench, a simulated
+# frame grabber): OpenCV's BGR to YUV 4:2:2 (BT.601, each pair of pixels
+# sharing one U and V), and a Bayer mosaic keeping each pixel's own channel.
+_YUV_FROM_BGR: Dict[str, int] = {
+    'yuv422': cv2.COLOR_BGR2YUV_UYVY,
+    'yuv422_yuy2': cv2.COLOR_BGR2YUV_YUY2,
+}
+# BGR channel of the pixels (0, 0), (0, 1), (1, 0), (1, 1) of each 2 x 2 block.
+_BAYER_CHANNELS: Dict[str, Tuple[int, int, int, int]] = {
+    'bayer_rggb8': (2, 1, 1, 0),
+    'bayer_bggr8': (0, 1, 1, 2),
+    'bayer_gbrg8': (1, 0, 2, 1),
+    'bayer_grbg8': (1, 2, 0, 1),
 }
 
 _MSG_FIELDS = ('height', 'width', 'encoding', 'is_bigendian', 'step', 'data')
@@ -200,10 +217,13 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     """
     Return ``(height, width, encoding, is_bigendian, step, data)`` for an image.
 
-    ``image`` is BGR uint8 (H, W, 3) for bgr8 and rgb8, grey uint8 (H, W) or
-    (H, W, 1) for mono8 and mono16; mono16 also takes uint16 grey as is and
-    scales uint8 by 257 (so 255 becomes 65535). Rows are packed (step = width
-    * bytes per pixel) and 16-bit data is little-endian (is_bigendian = 0).
+    ``image`` is BGR uint8 (H, W, 3) for bgr8, rgb8, the YUV 4:2:2 and the
+    Bayer encodings (which lose what those formats lose: half the chroma
+    along the rows, two of each pixel's three channels), grey uint8 (H, W)
+    or (H, W, 1) for mono8 and mono16; mono16 also takes uint16 grey as is
+    and scales uint8 by 257 (so 255 becomes 65535). Rows are packed (step =
+    width * bytes per pixel) and 16-bit data is little-endian
+    (is_bigendian = 0).
     """
     if encoding not in ENCODE_ENCODINGS:
         raise ImageError(f'cannot encode to {encoding!r}; supported: '
@@ -215,7 +235,7 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
         raise ImageError(f'image for {encoding} must be '
                          + ' or '.join(np.dtype(t).name for t in allowed)
                          + f', got {image.dtype}')
-    if encoding in ('bgr8', 'rgb8'):
+    if encoding in ('bgr8', 'rgb8') or encoding in _YUV_FROM_BGR or encoding in _BAYER_CHANNELS:
         if image.ndim != 3 or image.shape[2] != 3:
             raise ImageError(f'image for {encoding} must be HxWx3 BGR, got shape {image.shape}')
     else:
@@ -227,8 +247,18 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     if height == 0 or width == 0:
         raise ImageError(f'image size must be positive, got {width}x{height} (width x height)')
 
+    if encoding in _YUV_FROM_BGR and width % 2:
+        raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
     if encoding == 'rgb8':
         image = image[:, :, ::-1]
+    elif encoding in _YUV_FROM_BGR:
+        image = cv2.cvtColor(np.ascontiguousarray(image), _YUV_FROM_BGR[encoding])
+    elif encoding in _BAYER_CHANNELS:
+        mosaic = np.empty((height, width), np.uint8)
+        for k, channel in enumerate(_BAYER_CHANNELS[encoding]):
+            dy, dx = divmod(k, 2)
+            mosaic[dy::2, dx::2] = image[dy::2, dx::2, channel]
+        image = mosaic
     elif encoding == 'mono16':
         if image.dtype == np.uint8:
             image = image.astype(np.uint16) * 257

@@ -1,5 +1,6 @@
 """The stress benchmark's machinery on a few frames (nothing here is timed)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -15,12 +16,29 @@ CONFIG = load_pattern_config()
 def test_every_condition_of_the_issue_is_a_row():
     names = set(stress.CONDITIONS)
     for needed in ('textures', 'dark noisy', 'photos', 'chromatic', 'mirror', 'dim', 'blur',
-                   'occlusion', 'interlace', 'far'):
+                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer'):
         assert needed in names
     lights = [n for n in stress.CONDITIONS if n.startswith('light ')]
     assert len(lights) >= 13 and {'light magenta', 'light red wall'} <= set(lights)
     gains = np.array([g for _, g in stress.LIGHTS])
     assert gains.min() >= 0.7 and gains.max() <= 1.4
+
+
+def test_raw_encodings_go_through_the_node_decoder():
+    frames = stress.make_frames(CONFIG, 1, 4, ['yuv422', 'bayer'])
+    cameras = bench_cameras()
+    for f in frames:
+        assert f.encoding in {'yuv422', 'yuv422_yuy2'} if f.condition == 'yuv422' else \
+            f.encoding.startswith('bayer_')
+        assert f.options.jpeg_quality is None
+        camera = cameras[f.camera_name]
+        sent = stress.render_frame(f, camera, CONFIG, 'dots')
+        seen = stress.render_frame(dataclasses.replace(f, encoding=None), camera, CONFIG,
+                                   'dots')
+        assert sent.shape == seen.shape and sent.dtype == np.uint8
+        # What the format loses, and no more: chroma or two channels a pixel.
+        diff = np.abs(sent.astype(int) - seen.astype(int))
+        assert diff.max() > 0 and diff.mean() < 4.0
 
 
 def test_frames_are_seeded_and_fit_their_condition():

@@ -333,6 +333,31 @@ def test_encode_round_trip(encoding):
     np.testing.assert_array_equal(decode_image(height, width, enc, big, step, data), image)
 
 
+@pytest.mark.parametrize('encoding', sorted(BAYER_PATTERNS))
+def test_encode_bayer_is_the_mosaic_and_decodes_to_the_scene(encoding):
+    height, width, enc, big, step, data = encode_image(SCENE, encoding)
+    assert (enc, step, len(data)) == (encoding, W, H * W)
+    mosaic = np.frombuffer(data, np.uint8).reshape(H, W)
+    np.testing.assert_array_equal(mosaic, bayer_mosaic(SCENE, BAYER_PATTERNS[encoding]))
+    out = decode_image(height, width, enc, big, step, data)
+    diff = np.abs(out.astype(int) - SCENE.astype(int))[interior_mask(2)]
+    assert diff.max() <= 2, diff.max()
+
+
+@pytest.mark.parametrize('encoding', ['yuv422', 'yuv422_yuy2'])
+def test_encode_yuv422_decodes_to_the_scene(encoding):
+    height, width, enc, big, step, data = encode_image(SCENE, encoding)
+    assert (enc, step, len(data)) == (encoding, 2 * W, 2 * H * W)
+    out = decode_image(height, width, enc, big, step, data)
+    diff = np.abs(out.astype(int) - SCENE.astype(int))[interior_mask(1)]
+    assert diff.max() <= 3, diff.max()
+    # Two pixels share their chroma: a colour edge between them is mixed.
+    edge = np.zeros((2, 2, 3), np.uint8)
+    edge[:, 0] = (0, 0, 255)
+    mixed = decode_image(*encode_image(edge, encoding))
+    assert mixed[0, 0, 2] < 200 and mixed[0, 1, 2] > 50     # red paler, black reddish
+
+
 def test_encode_byte_layout():
     pixel = np.array([[[10, 20, 30]]], np.uint8)           # B, G, R
     assert encode_image(pixel, 'bgr8')[4:] == (3, bytes([10, 20, 30]))
@@ -356,7 +381,9 @@ def test_encode_non_contiguous():
     (GREY, 'bgr8', 'HxWx3'),
     (SCENE, 'mono8', 'HxW grey'),
     (np.zeros((0, 4, 3), np.uint8), 'bgr8', 'positive'),
-    (SCENE, 'yuv422', 'bgr8, rgb8, mono8, mono16'),
+    (SCENE, 'rgba8', 'bgr8, rgb8, mono8, mono16, yuv422'),
+    (SCENE[:, :5], 'yuv422', 'even width'),
+    (GREY, 'bayer_rggb8', 'HxWx3'),
     (SCENE.tolist(), 'bgr8', 'numpy array'),
 ])
 def test_encode_errors(image, encoding, fragment):

@@ -1153,7 +1153,11 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 ring_valid[r, k] = False
     if _hidden_slots(ring_valid) > max_hidden:
         return False
-    # Both rings must agree, slot by slot: never guess.
+    # Both rings must agree, slot by slot: never guess. A slot they read
+    # differently is unknown; with a map of the codes that exist (max_hidden
+    # 2 or more) it is read as a hidden slot is, from the map, else the card
+    # is rejected. (A far card's dots of two or three pixels, their colour
+    # greyed by JPEG's half-resolution chroma, can tip one ring's dot over.)
     for r in range(n_rings):
         for k in range(RING_POINTS):
             if ring_valid[r, k]:
@@ -1161,10 +1165,19 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 agreed[k] = max(agreed[k], slot_letter[r, k])
     black = -1
     n_black = n_shown = 0
-    for r in range(n_rings):
-        for k in range(RING_POINTS):
-            if ring_valid[r, k] and slot_letter[r, k] != agreed[k]:
+    for k in range(RING_POINTS):
+        disagree = False
+        for r in range(n_rings):
+            disagree = disagree or (ring_valid[r, k] and slot_letter[r, k] != agreed[k])
+        if disagree:
+            if max_hidden < 2:
                 return False
+            for r in range(n_rings):
+                ring_valid[r, k] = False
+                slot_letter[r, k] = -1
+            agreed[k] = -1
+    if _hidden_slots(ring_valid) > max_hidden:
+        return False
     for k in range(RING_POINTS):
         n_shown += agreed[k] >= 0
         if agreed[k] == 0:

@@ -9,12 +9,13 @@ are known from the configuration; the camera's own colour response (channel
 gains, and the overlap of its colour filters that makes colours greyer) is
 fitted to the ring's dots, and every ink seen on the ring is then
 represented by its own dots. Every dot takes the nearest ink; both rings
-must agree, and each slot (its dots of both rings together) and the centre
-must be clearly nearer to their ink than to the next: a margin measured as
-a fraction of the way from the midpoint between the two inks to the
-nearest one. Point 1 is the one black slot; black must also be as dark as
-ink (a grey object is not). A card whose colours are unclear is rejected,
-never guessed.
+must agree (a slot they read differently is unknown, filled only from a
+map of the codes that exist, as a hidden slot is), and each slot (its dots
+of both rings together) and the centre must be clearly nearer to their ink
+than to the next: a margin measured as a fraction of the way from the
+midpoint between the two inks to the nearest one. Point 1 is the one
+black slot; black must also be as dark as ink (a grey object is not). A
+card whose colours are unclear is rejected, never guessed.
 
 A mirror shows the ring in the other order, which reads as another valid
 code; the handedness marks (:class:`~pattern_locator.card.pattern.HandednessMark`)
@@ -74,7 +75,9 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     when unsure.
 
     Up to ``max_hidden`` slots may be unseen in both rings (an object over
-    the card). One hidden slot and seven coloured ones: the hidden one is
+    the card); when ``max_hidden`` is 2 or more (the codes that exist are
+    known), a slot the two rings read differently counts as one of them,
+    else it rejects the card. One hidden slot and seven coloured ones: the hidden one is
     point 1 (the one black), and the code is whole. Otherwise the reading
     is partial (``code`` None, ``slot_letters`` with '?' where hidden, and
     ``point1_slot`` -1 when the black is hidden too): only a list of the

@@ -127,6 +127,25 @@ def test_unclear_colours_are_rejected_never_guessed():
     assert read_code(seen(code), valid, 2, CFG, PARAMS) is None
 
 
+def test_a_slot_the_rings_disagree_on_is_unknown_and_only_a_map_may_fill_it():
+    code = CFG.encode(2, 17, 3)
+    d = seen(code, point1_slot=0)
+    d[1 + RING_POINTS + 2] = INKS['R'] if code.ring[2] != 'R' else INKS['B']
+    # Without a map: rejected (as in the test above).
+    assert read_code(d, ALL, 2, CFG, PARAMS, max_hidden=1) is None
+    # With one (max_hidden 2 or more): a partial reading, that slot unknown.
+    reading = read_code(d, ALL, 2, CFG, PARAMS, max_hidden=3)
+    assert reading.code is None and reading.point1_slot == 0
+    assert reading.slot_letters == code.ring[:2] + '?' + code.ring[3:]
+    assert reading.ring_codes == (reading.slot_letters,) * 2
+    assert np.isnan(reading.slot_margins[2])
+    # It counts as a hidden slot: with two more hidden, over the limit.
+    valid = ALL.copy()
+    valid[[1 + 5, 1 + RING_POINTS + 5, 1 + 6, 1 + RING_POINTS + 6]] = False
+    assert read_code(d, valid, 2, CFG, PARAMS, max_hidden=2) is None
+    assert read_code(d, valid, 2, CFG, PARAMS, max_hidden=3) is not None
+
+
 def test_one_ring_is_enough_when_the_other_is_hidden_there():
     code = CFG.encode(7, 63, 2)
     valid = ALL.copy()

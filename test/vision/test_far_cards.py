@@ -115,3 +115,23 @@ def test_far_candidates_are_bounded_on_twenty_thousand_blobs():
     extra = card_stage.far_candidates(dot_image, CFG, np.zeros(0, dtype=np.intp),
                                       np.zeros(n, dtype=bool))
     assert len(extra) <= card_stage._FAR_EXTRA
+
+
+def test_far_card_whose_rings_disagree_in_a_slot_is_read_from_the_map_only():
+    # Frame 11 of the stress bench's far frames (seed 24): at 7 m, JPEG's
+    # half-resolution chroma tips one ring's dot of a slot to another ink.
+    # Without a map the card is refused (never guessed); with the building's
+    # codes that slot is read as a hidden one is, and marked as from the map
+    # (a localizer takes it only to follow a robot it has located).
+    from pattern_locator.evaluation import stress
+    from pattern_locator.evaluation.bench import bench_cameras
+    from pattern_locator.vision.locate import CardLocator
+
+    frames = stress.make_frames(CFG, 20, 24, ['far'])
+    frame = frames[11]
+    camera = bench_cameras()[frame.camera_name]
+    image = stress.render_frame(frame, camera, CFG, 'dots')
+    assert CardLocator(CFG).locate(image, camera) == []
+    located = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).locate(image, camera)
+    assert [(c.detection.ids, c.detection.slots_from_map) for c in located] == [(frame.ids, 1)]
+    assert located[0].T_camera_pattern is not None

@@ -133,12 +133,18 @@ def test_a_completed_code_is_taken_only_soon_after_the_last_fix():
     assert gates.check_partial(yaw_pose(5.01, 6.3, 0.0, 12.0), cov, 'building', 2.0) is None
 
 
-def test_a_hidden_card_seen_long_after_the_last_fix_gives_no_fix(scene):
+def _located(scene, point=7):
+    """Return a localizer located by two clean images (stamps 1.0, 1.1) and the hidden image."""
     pan, tilt, clean, T_camera_card = scene
-    hidden = _hide_point(clean, T_camera_card, 7)
     loc = localizer()
     loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
     assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    return loc, _hide_point(clean, T_camera_card, point)
+
+
+def test_a_hidden_card_seen_long_after_the_last_fix_gives_no_fix(scene):
+    pan, tilt, clean, _ = scene
+    loc, hidden = _located(scene)
     result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=3.0)
     assert result.fix is None and result.rejections == ('partial_code',)
     assert 'last 1 s' in result.no_fix_reason
@@ -207,11 +213,8 @@ def test_two_that_would_both_put_the_robot_there_give_no_fix(scene):
 
 
 def test_the_head_keeps_following_the_card_it_chose(scene):
-    pan, tilt, clean, T_camera_card = scene
-    hidden = _hide_point(clean, T_camera_card, 7)
-    loc = localizer()
-    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
-    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1)
+    pan, tilt, _, T_camera_card = scene
+    loc, hidden = _located(scene)
     result = loc.process(hidden, CAMERA, pan, tilt, stamp_s=1.2)
     assert result.fix is not None and result.detections[0].ids is None
     # The target chooser names the card the fix took, where the card is.
@@ -221,11 +224,8 @@ def test_the_head_keeps_following_the_card_it_chose(scene):
 
 
 def test_the_one_that_fits_must_pass_the_gates_too(scene):
-    pan, tilt, clean, T_camera_card = scene
-    hidden = _hide_point(clean, T_camera_card, 7)
-    loc = localizer()
-    loc.process(clean, CAMERA, pan, tilt, stamp_s=1.0)
-    assert loc.process(clean, CAMERA, pan, tilt, stamp_s=1.1).fix is not None
+    pan, tilt, _, _ = scene
+    loc, hidden = _located(scene)
     # A gate that refuses the card where it is: the one hypothesis where the
     # robot is may not be taken, and the others are elsewhere.
     loc.gates.parameters = dataclasses.replace(loc.gates.parameters, max_camera_distance_m=1.0)

@@ -1165,10 +1165,13 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 agreed[k] = max(agreed[k], slot_letter[r, k])
     black = -1
     n_black = n_shown = 0
+    # (A slot that no ring read black cannot be taken for point 1.)
+    no_black = -1
     for k in range(RING_POINTS):
-        disagree = False
+        disagree = any_black = False
         for r in range(n_rings):
             disagree = disagree or (ring_valid[r, k] and slot_letter[r, k] != agreed[k])
+            any_black = any_black or (ring_valid[r, k] and slot_letter[r, k] == 0)
         if disagree:
             if max_hidden < 2:
                 return False
@@ -1176,6 +1179,8 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 ring_valid[r, k] = False
                 slot_letter[r, k] = -1
             agreed[k] = -1
+            if not any_black:
+                no_black = k
     if _hidden_slots(ring_valid) > max_hidden:
         return False
     for k in range(RING_POINTS):
@@ -1185,6 +1190,10 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
             if black < 0:
                 black = k
     if n_black > 1 or (n_black == 0 and n_shown == RING_POINTS):
+        return False
+    # Seven coloured slots make the eighth point 1 (read_code): not one the
+    # rings read as two colours.
+    if n_black == 0 and n_shown == RING_POINTS - 1 and no_black >= 0:
         return False
     # Each slot decided on the evidence of both rings: their dots' colour
     # directions summed, with a margin.

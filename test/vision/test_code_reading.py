@@ -144,6 +144,17 @@ def test_a_slot_the_rings_disagree_on_is_unknown_and_only_a_map_may_fill_it():
     valid[[1 + 5, 1 + RING_POINTS + 5, 1 + 6, 1 + RING_POINTS + 6]] = False
     assert read_code(d, valid, 2, CFG, PARAMS, max_hidden=2) is None
     assert read_code(d, valid, 2, CFG, PARAMS, max_hidden=3) is not None
+    # Point 1 read as two colours: seven coloured slots would make it point 1
+    # (as when it is hidden), but neither ring saw black there: rejected. (A
+    # coloured centre: a black one is refused with point 1 unseen.)
+    code = CFG.encode(5, 17, 3)
+    d = seen(code, point1_slot=0)
+    d[1] = INKS['R']
+    d[1 + RING_POINTS] = INKS['B']
+    assert read_code(d, ALL, 2, CFG, PARAMS, max_hidden=3) is None
+    # One ring saw the black: point 1, as for a hidden slot.
+    d[1] = INKS['K']
+    assert read_code(d, ALL, 2, CFG, PARAMS, max_hidden=3).code == code
 
 
 def test_one_ring_is_enough_when_the_other_is_hidden_there():

@@ -918,7 +918,7 @@ def _hidden_slots(ring_valid):
 
 @_kernel
 def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
-                 max_hidden, min_margin, decisive_margin):
+                 max_hidden, known_codes, min_margin, decisive_margin):
     """
     Ink of every slot and of the centre, with margins; the numeric part of ``read_code``.
 
@@ -944,7 +944,8 @@ def read_colours(colour, valid, partial, n_rings, inks, light, crosstalk, min_da
     found[0], found[1] = 0, -1
     # One exit: each return of a large tuple costs numba compile time.
     ok = _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
-                    max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+                    max_hidden, known_codes, min_margin, decisive_margin, agreed, slot_letter,
+                    margins, grey,
                     found)
     return ok, found[0], agreed, slot_letter, margins, grey, found[1]
 
@@ -1061,7 +1062,8 @@ def _ink_scatter(unit, ring_valid, slot_letter, n_rings):
 
 @_kernel
 def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
-               max_hidden, min_margin, decisive_margin, agreed, slot_letter, margins, grey,
+               max_hidden, known_codes, min_margin, decisive_margin, agreed, slot_letter,
+               margins, grey,
                found):
     """Do :func:`read_colours`'s work into its arrays (``found``: centre, black); False: reject."""
     n_ring_dots = n_rings * RING_POINTS
@@ -1154,9 +1156,9 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
     if _hidden_slots(ring_valid) > max_hidden:
         return False
     # Both rings must agree, slot by slot: never guess. A slot they read
-    # differently is unknown; with a map of the codes that exist (max_hidden
-    # 2 or more) it is read as a hidden slot is, from the map, else the card
-    # is rejected. (A far card's dots of two or three pixels, their colour
+    # differently is unknown; with a map of the codes that exist
+    # (``known_codes``) it is read as a hidden slot is, from the map, else
+    # the card is rejected. (A far card's dots of two or three pixels, their colour
     # greyed by JPEG's half-resolution chroma, can tip one ring's dot over.)
     for r in range(n_rings):
         for k in range(RING_POINTS):
@@ -1173,7 +1175,7 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
             disagree = disagree or (ring_valid[r, k] and slot_letter[r, k] != agreed[k])
             any_black = any_black or (ring_valid[r, k] and slot_letter[r, k] == 0)
         if disagree:
-            if max_hidden < 2:
+            if not known_codes:
                 return False
             for r in range(n_rings):
                 ring_valid[r, k] = False
@@ -1608,7 +1610,7 @@ def warm_up() -> float:
     inks = np.eye(4, 3, dtype=f8) + 0.1
     read_colours(np.full((rows, 3), 0.5), np.ones(rows, dtype=np.bool_),
                  np.zeros(rows, dtype=np.bool_), 2, inks, np.ones(3), np.linspace(0.0, 0.45, 7),
-                 0.2, 1, 0.35, 0.6)
+                 0.2, 1, False, 0.35, 0.6)
     grid = np.zeros((2, 2), dtype=np.float32)
     bilinear(grid, np.zeros(1), np.zeros(1), 8)
     threshold(grid, grid, np.float32(0.25), np.float32(10.0), 24)

@@ -65,7 +65,8 @@ def ink_darkness(config: PatternConfig) -> np.ndarray:
 
 def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: PatternConfig,
               params: DetectorParams, white: Optional[np.ndarray] = None,
-              max_hidden: int = 0, partial: Optional[np.ndarray] = None) -> Optional[Reading]:
+              max_hidden: int = 0, partial: Optional[np.ndarray] = None,
+              known_codes: bool = False) -> Optional[Reading]:
     """
     Read the code from dot colours in slot order (row 0 the centre, then ring r slot k).
 
@@ -75,10 +76,11 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     when unsure.
 
     Up to ``max_hidden`` slots may be unseen in both rings (an object over
-    the card); when ``max_hidden`` is 2 or more (the codes that exist are
-    known), a slot the two rings read differently counts as one of them,
-    else it rejects the card. One hidden slot and seven coloured ones: the hidden one is
-    point 1 (the one black), and the code is whole. Otherwise the reading
+    the card). With ``known_codes`` (a list of the codes that exist will
+    complete a partial reading), a slot the two rings read differently
+    counts as one of them; else it rejects the card. One hidden slot and
+    seven coloured ones: the hidden one is point 1 (the one black; not a
+    slot the rings read as two colours), and the code is whole. Otherwise the reading
     is partial (``code`` None, ``slot_letters`` with '?' where hidden, and
     ``point1_slot`` -1 when the black is hidden too): only a list of the
     codes that exist can complete it (:func:`resolve_partial`).
@@ -103,7 +105,7 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     # _fit_response's documentation.
     ok, centre, agreed, slot_letter, margins, grey, black = card_kernels.read_colours(
         colour, valid, partial, n_rings, _inks(config), np.ascontiguousarray(light, np.float64),
-        _CROSSTALK, float(params.min_darkness), int(max_hidden),
+        _CROSSTALK, float(params.min_darkness), int(max_hidden), bool(known_codes),
         float(params.min_colour_margin), float(params.decisive_margin))
     if not ok:
         return None

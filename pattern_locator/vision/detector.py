@@ -314,7 +314,7 @@ class Detector:
         readable = valid | (spots.readable & ~spots.valid)
         reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour,
                             max_hidden=params.max_hidden_slots if self._codes else 1,
-                            partial=spots.partial)
+                            partial=spots.partial, known_codes=bool(self._codes))
         if reading is None:
             return None
         valid[list(reading.not_dots)] = False

@@ -84,6 +84,8 @@ _BAYER_CHANNELS: Dict[str, Tuple[int, int, int, int]] = {
     'bayer_grbg8': (1, 2, 0, 1),
 }
 
+_ENCODED_FROM_BGR = ('bgr8', 'rgb8', *_YUV_FROM_BGR, *_BAYER_CHANNELS)
+
 _MSG_FIELDS = ('height', 'width', 'encoding', 'is_bigendian', 'step', 'data')
 
 
@@ -172,8 +174,7 @@ def decode_image(height: int, width: int, encoding: str, is_bigendian: int, step
     if step < row_bytes:
         raise ImageError(f'step {_short(step)} is smaller than width * bytes per pixel = '
                          f'{width} * {bpp} = {row_bytes} for {encoding}')
-    if encoding in _YUV_CODES and width % 2:
-        raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
+    _check_yuv_width(encoding, width)
     if encoding in _BAYER_CODES and (width < 2 or height < 2):
         raise ImageError(f'{encoding} needs at least 2x2 pixels to demosaic, '
                          f'got {width}x{height}')
@@ -235,7 +236,7 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
         raise ImageError(f'image for {encoding} must be '
                          + ' or '.join(np.dtype(t).name for t in allowed)
                          + f', got {image.dtype}')
-    if encoding in ('bgr8', 'rgb8') or encoding in _YUV_FROM_BGR or encoding in _BAYER_CHANNELS:
+    if encoding in _ENCODED_FROM_BGR:
         if image.ndim != 3 or image.shape[2] != 3:
             raise ImageError(f'image for {encoding} must be HxWx3 BGR, got shape {image.shape}')
     else:
@@ -247,8 +248,7 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     if height == 0 or width == 0:
         raise ImageError(f'image size must be positive, got {width}x{height} (width x height)')
 
-    if encoding in _YUV_FROM_BGR and width % 2:
-        raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
+    _check_yuv_width(encoding, width)
     if encoding == 'rgb8':
         image = image[:, :, ::-1]
     elif encoding in _YUV_FROM_BGR:
@@ -266,6 +266,12 @@ def encode_image(image: np.ndarray, encoding: str = 'bgr8'
     packed = np.ascontiguousarray(image)
     step = width * _BYTES_PER_PIXEL[encoding]
     return height, width, encoding, 0, step, packed.tobytes()
+
+
+def _check_yuv_width(encoding: str, width: int) -> None:
+    """Raise ImageError for a YUV 4:2:2 image of odd width (two pixels share a U and a V)."""
+    if encoding in _YUV_CODES and width % 2:
+        raise ImageError(f'{encoding} (YUV 4:2:2) needs an even width, got {width}')
 
 
 def image_from_msg(msg: Any, max_pixels: Optional[int] = None) -> np.ndarray:

@@ -31,7 +31,10 @@ The conditions (all procedural, nothing downloaded):
 * ``yuv422`` and ``bayer``: what a frame grabber or a raw sensor sends, the
   ordinary frames encoded as YUV 4:2:2 (chroma halved along the rows) or as
   a Bayer mosaic (one channel a pixel) and decoded by the locator node's own
-  decoder (:mod:`..nodes.image_codec`).
+  decoder (:mod:`..nodes.image_codec`);
+* ``mottled``: coloured blotches of the dots' own sizes behind the card (a
+  patterned carpet, gravel or leaves seen close, a busy poster): hundreds
+  of blobs that have neighbours all round, as a card's centre has.
 
 Cards are at 1.25-4 m unless the condition says otherwise, tilted up to 60
 degrees, anywhere in the image. Our locator is given a building map per
@@ -272,11 +275,14 @@ def _condition_makers() -> Dict[str, Callable]:
         pattern = str(rng.choice(['bayer_rggb8', 'bayer_bggr8', 'bayer_gbrg8', 'bayer_grbg8']))
         return {'encoding': pattern}, _imaging(rng, jpeg_quality=None)
 
+    def mottled(rng, config):
+        return {}, _imaging(rng, background='mottled')
+
     makers = {'plain': plain, 'textures': textures, 'dark noisy': dark, 'photos': photos}
     makers.update({f'light {name}': light(gains) for name, gains in LIGHTS})
     makers.update({'chromatic': chromatic, 'mirror': mirror, 'dim': dim, 'blur': blur,
                    'occlusion': occlusion, 'interlace': interlace, 'far': far,
-                   'yuv422': yuv422, 'bayer': bayer})
+                   'yuv422': yuv422, 'bayer': bayer, 'mottled': mottled})
     return makers
 
 

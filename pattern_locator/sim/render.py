@@ -38,7 +38,7 @@ from ..errors import CodeError, ConfigError, ImageError
 from ..vision.camera import CameraModel
 from ..vision.geometry import look_at, Pose, rodrigues
 
-BACKGROUNDS = ('wall', 'clutter', 'black', 'white', 'texture', 'night', 'photo')
+BACKGROUNDS = ('wall', 'clutter', 'black', 'white', 'texture', 'night', 'photo', 'mottled')
 # Surfaces closer than this to the camera plane (metres) are not rendered.
 NEAR_PLANE = 1e-3
 # Linear reflectance of a card seen from behind (plain paper back).
@@ -291,7 +291,9 @@ class RenderOptions:
     ``white`` (0.85, the same as the paper), ``texture`` (fine texture such
     as carpet, gravel or foliage: noise blurred by 0.6-1.2 px), ``night``
     (a dark scene, reflectance 0.002-0.02, a few small lamps), ``photo`` (a
-    cluttered room: textured patches, polka dots, shapes, text and shading).
+    cluttered room: textured patches, polka dots, shapes, text and shading),
+    ``mottled`` (coloured blotches of the dots' own size, 4-64 px: a
+    patterned carpet, gravel or leaves seen close, a busy poster).
     """
 
     supersample: int = 3
@@ -608,6 +610,8 @@ def _background(kind: str, height: int, width: int, rng: np.random.Generator) ->
         return _fine_texture(height, width, rng)
     if kind == 'night':
         return _night(height, width, rng)
+    if kind == 'mottled':
+        return _mottled(height, width, rng)
     # Clutter is drawn anti-aliased in 8 bits (cv2 anti-aliases 8-bit images
     # only) with a 2.2 gamma, then turned back into linear reflectance.
     to_gamma = np.float32(1 / 2.2)
@@ -644,6 +648,17 @@ def _fine_texture(height: int, width: int, rng: np.random.Generator) -> np.ndarr
     coarse = rng.uniform(0.7, 1.1, (3, 4)).astype(np.float32)
     return texture * cv2.resize(coarse, (width, height),
                                 interpolation=cv2.INTER_CUBIC)[:, :, None]
+
+
+def _mottled(height: int, width: int, rng: np.random.Generator) -> np.ndarray:
+    """Coloured blotches 4, 16 and 64 pixels across, summed: blobs of every dot size."""
+    srgb = np.full((height, width, 3), rng.uniform(60.0, 180.0), dtype=np.float32)
+    for cell in (4, 16, 64):
+        coarse = rng.standard_normal((height // cell + 2, width // cell + 2, 3),
+                                     dtype=np.float32)
+        blotches = cv2.resize(coarse, (width, height), interpolation=cv2.INTER_CUBIC)
+        srgb += float(rng.uniform(10.0, 40.0)) * blotches
+    return (np.clip(srgb, 0.0, 255.0) / 255.0) ** 2.2
 
 
 def _night(height: int, width: int, rng: np.random.Generator) -> np.ndarray:

@@ -466,6 +466,46 @@ def _median(values):
 
 
 @_kernel
+def _median_in_place(values, n):
+    """
+    Median of ``values[:n]`` (no NaN), as numpy's; reorders them.
+
+    Hoare's selection of the middle value (and, for even ``n``, the largest
+    below it): linear time on average, for the many short lists of
+    :func:`ring_evidence`.
+    """
+    if n <= 0:
+        return np.nan
+    k = n // 2
+    lo, hi = 0, n - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    middle = values[k]
+    if n % 2:
+        return middle
+    below = values[0]
+    for t in range(1, k):
+        below = max(below, values[t])
+    return (below + middle) / 2
+
+
+@_kernel
 def _first_not_below(sorted_values, x):
     """First index whose value is not below ``x`` (numpy's ``searchsorted``, side left)."""
     lo, hi = 0, sorted_values.shape[0]
@@ -546,56 +586,157 @@ def centre_evidence(u, v, area, box, scale, rho_out, min_area, min_neighbours, c
     return idx[:m], evidence[:m], reach
 
 
+# A candidate centre's bare paper (ring_evidence): from beyond its own blurred
+# edge, in its moment ellipse's radii; each blob there costs this much of a
+# card's 34 points (16 ring dots and 2 marks, 8 octants twice).
+_CLEAR_FROM = 1.15
+_CLEAR_WEIGHT = 6.0
+# Centres of fewer decimated pixels than this: their shape is no guide.
+_FUZZY_PIXELS = 9
+
+
 @_kernel
-def ring_evidence(u, v, area, order, idx, reach, min_neighbours, most):
+def ring_evidence(u, v, area, box, label, labels, scale, idx, reach, min_neighbours, most,
+                  clear_rho, ring_rho, cell, budget):
     """
     How much the blobs round each candidate ``idx`` look like a card's rings.
 
-    The neighbours within ``reach`` (found through the blobs sorted by
-    column, so each candidate costs the blobs in its own reach) of a ring
-    dot's size (0.12 to 0.9 times the centre's area) that are of one size
-    (within a factor 1.6 of their median): their number (at most ``most``)
-    plus twice the octants round the centre they cover; 0 with fewer than
-    ``min_neighbours`` neighbours. ``order``: the blobs by column (a stable
-    argsort of ``u``).
+    Looked at in the candidate's own frame, where its moment ellipse
+    (semi-axes twice the standard deviations) is the unit circle and a
+    card's rings are near circles of radii ``R / r_centre``. Between
+    ``clear_rho`` and ``ring_rho`` (the rings' zone, on the card's paper),
+    the neighbours of a ring dot's size (0.12 to 0.9 times the centre's
+    area) that are of one size (within a factor 1.6 of their median): their
+    number (at most ``most``, a card's dots and marks) plus twice the
+    octants round the centre they cover. Less, for what a card does not
+    have: ``_CLEAR_WEIGHT`` for each blob of any dot-like size (0.03 to 1.5
+    times the centre's area) between the centre's own blurred edge
+    (``_CLEAR_FROM``) and ``clear_rho``, where a card has bare paper, and
+    one for each such blob in the rings' zone beyond ``most``. A centre of
+    fewer than ``_FUZZY_PIXELS`` pixels (``scale`` squared image pixels
+    each) is taken as a circle as wide as its longer side, with no bare
+    paper test. A texture's
+    blob has neighbours all round at every distance, more than a card has.
+    0 with fewer than ``min_neighbours`` ring-sized neighbours or no
+    ellipse; only blobs within ``reach`` (a square) count. The blobs are
+    sorted into ``cell``-pixel grid cells first, so each candidate costs the
+    blobs in its own zone; the candidates are taken in ``idx``'s order until
+    ``budget`` cells and blobs have been looked at, and those left score
+    -inf: bounded work whatever the clutter.
     """
     n = u.shape[0]
-    if n == 0 or v.shape[0] < n or area.shape[0] < n or reach.shape[0] < n:
-        return np.zeros(idx.shape[0])
-    su = np.empty(order.shape[0])
-    for s in range(order.shape[0]):
-        su[s] = u[min(max(order[s], 0), n - 1)]
     score = np.zeros(idx.shape[0])
-    near = np.empty(n, dtype=np.intp)
+    if n == 0 or v.shape[0] < n or area.shape[0] < n or reach.shape[0] < n \
+            or box.shape[0] < n or box.shape[1] < 4 or label.shape[0] < n or cell < 1:
+        return score
+    # Blobs by grid cell (a counting sort): members[start[c]:start[c + 1]].
+    gw = gh = 1
+    for j in range(n):
+        if not (abs(u[j]) < 1e7 and abs(v[j]) < 1e7):
+            return score
+        gw = max(gw, int(max(u[j], 0.0)) // cell + 1)
+        gh = max(gh, int(max(v[j], 0.0)) // cell + 1)
+    start = np.zeros(gw * gh + 1, dtype=np.intp)
+    cell_of = np.empty(n, dtype=np.intp)
+    for j in range(n):
+        c = (int(max(v[j], 0.0)) // cell) * gw + int(max(u[j], 0.0)) // cell
+        cell_of[j] = c
+        start[c + 1] += 1
+    for c in range(gw * gh):
+        start[c + 1] += start[c]
+    # Each cell's blobs side by side (read in turn, not scattered).
+    fill = start[:-1].copy()
+    members = np.empty(n, dtype=np.intp)
+    cu, cv, ca = np.empty(n), np.empty(n), np.empty(n)
+    for j in range(n):
+        k = fill[cell_of[j]]
+        members[k], cu[k], cv[k], ca[k] = j, u[j], v[j], area[j]
+        fill[cell_of[j]] += 1
+    near_area = np.empty(n)
+    near_x = np.empty(n)
+    near_y = np.empty(n)
+    sizes = np.empty(n)
+    octants = np.zeros(8, dtype=np.bool_)
+    clear2, from2, ring2 = clear_rho * clear_rho, _CLEAR_FROM * _CLEAR_FROM, ring_rho * ring_rho
+    visits = 0
     for i in range(idx.shape[0]):
+        if visits > budget:
+            score[i:] = -np.inf
+            break
         ci = idx[i]
         if ci < 0 or ci >= n:
             continue
-        r = reach[ci]
-        lo = _first_not_below(su, u[ci] - r)
-        hi = _first_not_below(su, u[ci] + r)
+        uc, vc, ac = u[ci], v[ci], area[ci]
+        # A centre of a few pixels (a far card's) is no guide to its own
+        # shape: a circle as big as its longer side, and no bare-paper test
+        # (a tilted card's inner ring comes that close along its short axis).
+        fuzzy = ac < _FUZZY_PIXELS * scale * scale
+        if fuzzy:
+            semi_long = semi_short = max(0.5 * scale * max(box[ci, 2], box[ci, 3]),
+                                         math.sqrt(ac / math.pi))
+            ex, ey = 1.0, 0.0
+        else:
+            cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
+            small, big, ex, ey = _eig2(cxx, cxy, cyy)
+            if not small > 0.0:
+                continue
+            semi_long, semi_short = 2.0 * math.sqrt(big), 2.0 * math.sqrt(small)
+        if not semi_short > 0.0:
+            continue
+        # The rings' zone, an ellipse: its box, within the square reach.
+        ru = min(reach[ci], ring_rho * math.hypot(semi_long * ex, semi_short * ey))
+        rv = min(reach[ci], ring_rho * math.hypot(semi_long * ey, semi_short * ex))
+        x0 = min(max(int((uc - ru) // cell), 0), gw - 1)
+        x1 = min(max(int((uc + ru) // cell), 0), gw - 1)
+        y0 = min(max(int((vc - rv) // cell), 0), gh - 1)
+        y1 = min(max(int((vc + rv) // cell), 0), gh - 1)
+        # Unit vectors along the ellipse's axes, over its semi-axes.
+        lx, ly = ex / semi_long, ey / semi_long
+        sx, sy = -ey / semi_short, ex / semi_short
         m = 0
-        for s in range(lo, hi):
-            j = min(max(order[s], 0), n - 1)
-            ratio = area[j] / area[ci]
-            if abs(v[j] - v[ci]) < r and ratio > 0.12 and ratio < 0.9:
-                near[m] = j
-                m += 1
+        crowd = 0
+        inside = 0
+        for gy in range(y0, y1 + 1):
+            for gx in range(x0, x1 + 1):
+                c = gy * gw + gx
+                visits += 1 + start[c + 1] - start[c]
+                for k in range(start[c], start[c + 1]):
+                    du, dv = cu[k] - uc, cv[k] - vc
+                    if not (abs(du) < ru and abs(dv) < rv) or members[k] == ci:
+                        continue
+                    ratio = ca[k] / ac
+                    if not (ratio > 0.03 and ratio < 1.5):
+                        continue
+                    x = du * lx + dv * ly
+                    y = du * sx + dv * sy
+                    q2 = x * x + y * y
+                    if q2 < clear2 and not fuzzy:
+                        crowd += q2 > from2
+                    elif q2 < ring2 and q2 > from2:
+                        inside += 1
+                        if ratio > 0.12 and ratio < 0.9:
+                            near_area[m] = ca[k]
+                            near_x[m] = x
+                            near_y[m] = y
+                            m += 1
         if m < min_neighbours:
             continue
-        a = np.empty(m)
         for k in range(m):
-            a[k] = area[near[k]]
-        typical = _median(a)
-        octants = np.zeros(8, dtype=np.bool_)
+            sizes[k] = near_area[k]
+        typical = _median_in_place(sizes, m)
+        octants[:] = False
         alike = 0
         for k in range(m):
-            j = near[k]
-            if area[j] > typical / 1.6 and area[j] < typical * 1.6:
+            if near_area[k] > typical / 1.6 and near_area[k] < typical * 1.6:
                 alike += 1
-                t = math.atan2(v[j] - v[ci], u[j] - u[ci])
-                octants[int(math.floor((t + math.pi) / (math.pi / 4))) % 8] = True
-        score[i] = min(alike, most) + 2 * _count_true(octants)
+                x, y = near_x[k], near_y[k]
+                # The octant, 45 degrees each from the -x axis (atan2's).
+                octants[(0 if y < 0.0 else 4) + (
+                    (0 if x < 0.0 and -y < -x else 1 if x < 0.0 else 2 if -y > x else 3)
+                    if y < 0.0 else
+                    (0 if x > 0.0 and y < x else 1 if x > 0.0 else 2 if y > -x else 3))] = True
+        score[i] = min(alike, most) + 2 * _count_true(octants) - _CLEAR_WEIGHT * crowd \
+            - max(inside - most, 0)
     return score
 
 
@@ -1598,7 +1739,8 @@ def warm_up() -> float:
     labels = np.zeros((4, 4), dtype=i4)
     ring_rho = np.array([4.7, 3.0])
     idx, _, reach = centre_evidence(u, u, area, box, 2.0, 4.7, 10.0, 6, 16)
-    ring_evidence(u, u, area, np.arange(n), np.arange(2), reach, 6, 18)
+    ring_evidence(u, u, area, box, label, labels, 2, np.arange(2), reach, 6, 18, 2.0, 6.0, 16,
+                  1000)
     ring_of_spots(np.zeros((3, 2)), 1.0, 5.0, 6)
     status, slot_blob = group_slots(u, u, area, box, label, labels, 2, 0, ring_rho, 0.5, 64.0,
                                     False)

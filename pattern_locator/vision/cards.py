@@ -34,8 +34,9 @@ MIN_CENTRE_AREA = 10.0
 MIN_NEIGHBOURS = 6
 # Grid cell (image pixels) of the evidence counts.
 _CELL = 16
-# Candidates looked at more closely, per candidate examined.
-_SHORTLIST = 4
+# Blobs looked at round the candidates when ranking a crowded frame, at most
+# (card_kernels.ring_evidence; about 2 ms).
+_RING_EVIDENCE_BUDGET = 300_000
 # Far cards whose ring dots vanished in the decimated image: centres up to
 # this area (image pixels), this many tried, this many examined.
 _FAR_MAX_AREA = 64.0
@@ -67,8 +68,9 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
     of its extent, which covers tilts to 75 degrees), counted with summed
     area tables over a coarse grid, one per octave of blob area; counts
     beyond a card's are not more evidence, and ties go to the blob in the
-    quietest surroundings (``noise``, per blob). When many remain, the
-    shortlist is ranked by how ring-like its neighbours are.
+    quietest surroundings (``noise``, per blob). When more remain than the
+    budget, each is ranked first by how ring-like its neighbours are and how
+    bare the paper round it is (:func:`.card_kernels.ring_evidence`).
     """
     n = len(blobs)
     if n < 1 + MIN_NEIGHBOURS or not np.any(blobs.area >= MIN_CENTRE_AREA):
@@ -81,17 +83,26 @@ def rank_candidates(blobs: Blobs, config: PatternConfig, params: DetectorParams,
     # A card's two rings and its marks make 18 neighbours: more say a crowd
     # (texture, foliage), not more card. Among the crowded, the quietest
     # surroundings first: a card's paper is smooth.
+    most = 2 * RING_POINTS + 2
     quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
-    order = np.lexsort((-area[idx], quiet, -np.minimum(evidence, 2 * RING_POINTS + 2)))
-    idx = idx[order[:_SHORTLIST * params.max_candidates]]
+    order = np.lexsort((-area[idx], quiet, -np.minimum(evidence, most)))
     if len(idx) <= params.max_candidates:
-        return idx
-    # Many blobs crowd the shortlist (a textured floor, foliage): a card's
-    # ring dots are alike in size and all round their centre.
-    score = card_kernels.ring_evidence(u, v, area, np.argsort(u, kind='stable'), idx, reach,
-                                       MIN_NEIGHBOURS, 2 * RING_POINTS + 2)
-    quiet = np.zeros(len(idx)) if noise is None else np.asarray(noise, float)[idx]
-    return idx[np.lexsort((quiet, -score))[:params.max_candidates]]
+        return idx[order]
+    # More than the budget (a textured floor, foliage, a busy poster): every
+    # candidate is looked at in its own frame, where a card's ring dots are
+    # alike in size and all round it and bare paper lies between it and its
+    # inner ring (card_kernels.ring_evidence); the best first, the order
+    # above breaking ties. A crowd's blob has neighbours at every distance,
+    # and a near card's centre, its edge in the noise grid's cells, is not
+    # the quietest place: by counts and quiet alone, a fine texture's
+    # hundreds of candidates pushed a card out of the budget.
+    idx, evidence, quiet = idx[order], evidence[order], quiet[order]
+    score = card_kernels.ring_evidence(u, v, area, _i32(blobs.box), _i32(blobs.label),
+                                       _i32(blobs.labels), int(blobs.scale), idx, reach,
+                                       MIN_NEIGHBOURS, most, *_zones(config), _CELL,
+                                       _RING_EVIDENCE_BUDGET)
+    order = np.lexsort((-area[idx], quiet, -np.minimum(evidence, most), -score))
+    return idx[order[:params.max_candidates]]
 
 
 def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray,
@@ -225,9 +236,14 @@ def _ring_rho(config: PatternConfig) -> np.ndarray:
     return _per_config(config)[1]
 
 
+def _zones(config: PatternConfig) -> Tuple[float, float]:
+    """Return how far round the centre its paper is bare, and its rings reach, in centre radii."""
+    return _per_config(config)[4:6]
+
+
 def _slot_plane(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
     """Return the slot-ordered plane points (the centre last) and their dots' radii."""
-    return _per_config(config)[2:]
+    return _per_config(config)[2:4]
 
 
 def _per_config(config: PatternConfig):
@@ -237,7 +253,12 @@ def _per_config(config: PatternConfig):
         entry = (config,
                  np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius,
                  np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]]),
-                 np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius))
+                 np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius),
+                 # Bare paper round the centre, in centre radii: most of the
+                 # way to the inner ring's dots' inner edges; the rings' zone:
+                 # the outer ring's dots and a dot's width beyond.
+                 0.8 * (config.ring_radii[-1] - config.ring_dot_radius) / config.centre_dot_radius,
+                 (config.ring_radii[0] + 2 * config.ring_dot_radius) / config.centre_dot_radius)
         if len(_PER_CONFIG) >= 16:
             _PER_CONFIG.clear()
         _PER_CONFIG[id(config)] = entry

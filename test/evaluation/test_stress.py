@@ -16,7 +16,7 @@ CONFIG = load_pattern_config()
 def test_every_condition_of_the_issue_is_a_row():
     names = set(stress.CONDITIONS)
     for needed in ('textures', 'dark noisy', 'photos', 'chromatic', 'mirror', 'dim', 'blur',
-                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer'):
+                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer', 'mottled'):
         assert needed in names
     lights = [n for n in stress.CONDITIONS if n.startswith('light ')]
     assert len(lights) >= 13 and {'light magenta', 'light red wall'} <= set(lights)

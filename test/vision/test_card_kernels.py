@@ -2,6 +2,7 @@
 
 import math
 
+import cv2
 import numba
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig, RING_POINTS
@@ -78,8 +79,9 @@ def test_indices_outside_the_arrays_are_never_used(blobs):
     assert list(rows) == [0, CFG.n_rings * RING_POINTS]
     assert np.array_equal(points, [[blobs.u[0], blobs.v[0]], [blobs.u[1], blobs.v[1]]])
     reach = np.full(len(blobs), 50.0)
-    score = card_kernels.ring_evidence(blobs.u, blobs.v, blobs.area, np.argsort(blobs.u),
-                                       np.array([-1, len(blobs)], dtype=np.intp), reach, 6, 18)
+    score = card_kernels.ring_evidence(
+        blobs.u, blobs.v, blobs.area, blobs.box, blobs.label, blobs.labels, blobs.scale,
+        np.array([-1, len(blobs)], dtype=np.intp), reach, 6, 18, 1.9, 5.9, 16, 10 ** 6)
     assert np.array_equal(score, [0.0, 0.0])
 
 
@@ -145,3 +147,83 @@ def test_one_compiled_signature_per_kernel_after_warm_up_and_a_detection(blobs):
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
+
+
+def test_median_in_place_is_numpys_median():
+    rng = np.random.default_rng(6)
+    for n in range(1, 80):
+        for values in (rng.normal(size=n), rng.integers(0, 4, size=n).astype(float)):
+            scratch = np.concatenate([values, rng.normal(size=3)])
+            assert card_kernels._median_in_place(scratch, n) == np.median(values), (n, values)
+
+
+def _drawn_blobs(centres_and_radii, size=(480, 640)):
+    """Segment black discs drawn on white paper: (u, v, radius) each, the first the candidate."""
+    image = np.full(size + (3,), 230, np.uint8)
+    for u, v, r in centres_and_radii:
+        cv2.circle(image, (int(round(u * 16)), int(round(v * 16))), int(round(r * 16)),
+                   (30, 30, 30), -1, cv2.LINE_AA, 4)
+    blobs = segment(image, PARAMS).blobs
+    first = int(np.argmin(np.hypot(blobs.u - centres_and_radii[0][0],
+                                   blobs.v - centres_and_radii[0][1])))
+    return blobs, first
+
+
+def _ring_score(blobs, ci, budget=10 ** 6):
+    rho_out = CFG.ring_radii[0] / CFG.centre_dot_radius
+    _, _, reach = card_kernels.centre_evidence(
+        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float),
+        blobs.box, float(blobs.scale), rho_out, 10.0, 6, 16)
+    clear_rho = 0.8 * (CFG.ring_radii[1] - CFG.ring_dot_radius) / CFG.centre_dot_radius
+    ring_rho = (CFG.ring_radii[0] + 2 * CFG.ring_dot_radius) / CFG.centre_dot_radius
+    return card_kernels.ring_evidence(
+        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
+        blobs.label, blobs.labels, int(blobs.scale), np.array([ci], dtype=np.intp), reach,
+        6, 18, clear_rho, ring_rho, 16, budget)[0]
+
+
+def _card_discs(u0=320.0, v0=240.0, r=12.0):
+    """Return a card's centre and its two rings of eight discs, in the card's proportions."""
+    discs = [(u0, v0, r)]
+    for ring in CFG.ring_radii:
+        for k in range(RING_POINTS):
+            a = k * np.pi / 4
+            rho = ring / CFG.centre_dot_radius * r
+            discs.append((u0 + rho * np.sin(a), v0 - rho * np.cos(a),
+                          CFG.ring_dot_radius / CFG.centre_dot_radius * r))
+    return discs
+
+
+def test_ring_evidence_gives_a_card_full_marks_and_less_for_what_a_card_has_not():
+    # A card: 16 ring dots all round, bare paper between centre and rings.
+    blobs, ci = _drawn_blobs(_card_discs())
+    assert _ring_score(blobs, ci) == 16 + 2 * 8
+    # Blobs on the bare paper (a texture's neighbours at every distance).
+    blobs, ci = _drawn_blobs(_card_discs() + [(320.0 + 20.0, 240.0, 4.0),
+                                              (320.0 - 19.0, 240.0 + 5.0, 4.0)])
+    assert _ring_score(blobs, ci) == 16 + 2 * 8 - 2 * card_kernels._CLEAR_WEIGHT
+    # Small blobs among the rings, more than a card has there.
+    rng = np.random.default_rng(2)
+    extra = []
+    for _ in range(20000):
+        rho, a = rng.uniform(3.3, 5.4) * 12.0, rng.uniform(0.0, 2 * np.pi)
+        u, v = 320.0 + rho * np.cos(a), 240.0 + rho * np.sin(a)
+        if all(math.hypot(u - x, v - y) > r + 10.0 for x, y, r in _card_discs() + extra):
+            extra.append((u, v, 3.5))
+    blobs, ci = _drawn_blobs(_card_discs() + extra)
+    assert len(extra) >= 12 and len(blobs) == 1 + 16 + len(extra)
+    assert _ring_score(blobs, ci) == 16 + 2 * 8 - (16 + len(extra) - 18)
+
+
+def test_ring_evidence_stops_at_its_budget():
+    blobs, ci = _drawn_blobs(_card_discs())
+    rho_out = CFG.ring_radii[0] / CFG.centre_dot_radius
+    idx, _, reach = card_kernels.centre_evidence(
+        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
+        float(blobs.scale), rho_out, 10.0, 6, 16)
+    order = np.array([ci, ci, ci], dtype=np.intp)
+    score = card_kernels.ring_evidence(
+        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
+        blobs.label, blobs.labels, int(blobs.scale), order, reach, 6, 18, 1.9, 5.9, 16, 1)
+    # The first candidate is scored whatever the budget; none after it.
+    assert score[0] == 32.0 and np.all(np.isneginf(score[1:]))

@@ -612,17 +612,16 @@ def ring_evidence(u, v, area, box, label, labels, scale, idx, reach, min_neighbo
     have: ``_CLEAR_WEIGHT`` for each blob of any dot-like size (0.03 to 1.5
     times the centre's area) between the centre's own blurred edge
     (``_CLEAR_FROM``) and ``clear_rho``, where a card has bare paper, and
-    one for each such blob in the rings' zone beyond ``most``. A centre of
-    fewer than ``_FUZZY_PIXELS`` pixels (``scale`` squared image pixels
-    each) is taken as a circle as wide as its longer side, with no bare
-    paper test. A texture's
+    one for each such blob in the rings' zone beyond ``most``: a texture's
     blob has neighbours all round at every distance, more than a card has.
-    0 with fewer than ``min_neighbours`` ring-sized neighbours or no
-    ellipse; only blobs within ``reach`` (a square) count. The blobs are
-    sorted into ``cell``-pixel grid cells first, so each candidate costs the
-    blobs in its own zone; the candidates are taken in ``idx``'s order until
-    ``budget`` cells and blobs have been looked at, and those left score
-    -inf: bounded work whatever the clutter.
+    A centre of fewer than ``_FUZZY_PIXELS`` pixels (``scale`` squared image
+    pixels each) is taken as a circle as wide as its longer side, with no
+    bare-paper test. 0 with fewer than ``min_neighbours`` ring-sized
+    neighbours or no ellipse; only blobs within ``reach`` (a square) count.
+    The blobs are sorted into ``cell``-pixel grid cells first, so each
+    candidate costs the blobs in its own zone; the candidates are taken in
+    ``idx``'s order until ``budget`` cells and blobs have been looked at,
+    and those left score -inf: bounded work whatever the clutter.
     """
     n = u.shape[0]
     score = np.zeros(idx.shape[0])

@@ -35,8 +35,8 @@ MIN_NEIGHBOURS = 6
 # Grid cell (image pixels) of the evidence counts.
 _CELL = 16
 # Blobs looked at round the candidates when ranking a crowded frame, at most
-# (card_kernels.ring_evidence; about 2 ms).
-_RING_EVIDENCE_BUDGET = 300_000
+# (card_kernels.ring_evidence; a few milliseconds on the worst frames).
+_RING_EVIDENCE_BUDGET = 200_000
 # Far cards whose ring dots vanished in the decimated image: centres up to
 # this area (image pixels), this many tried, this many examined.
 _FAR_MAX_AREA = 64.0

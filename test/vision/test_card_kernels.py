@@ -10,7 +10,8 @@ from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCard
                                         render_scene, RenderOptions)
 from pattern_locator.vision import card_kernels
 from pattern_locator.vision.camera import CameraModel
-from pattern_locator.vision.cards import _ring_rho, fit_homography, group, rank_candidates
+from pattern_locator.vision.cards import (_ring_rho, _zones, fit_homography, group,
+                                          rank_candidates)
 from pattern_locator.vision.code_reading import read_code
 from pattern_locator.vision.detector import Detector
 from pattern_locator.vision.detector_params import DetectorParams
@@ -174,12 +175,10 @@ def _ring_score(blobs, ci, budget=10 ** 6):
     _, _, reach = card_kernels.centre_evidence(
         blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float),
         blobs.box, float(blobs.scale), rho_out, 10.0, 6, 16)
-    clear_rho = 0.8 * (CFG.ring_radii[1] - CFG.ring_dot_radius) / CFG.centre_dot_radius
-    ring_rho = (CFG.ring_radii[0] + 2 * CFG.ring_dot_radius) / CFG.centre_dot_radius
     return card_kernels.ring_evidence(
         blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
         blobs.label, blobs.labels, int(blobs.scale), np.array([ci], dtype=np.intp), reach,
-        6, 18, clear_rho, ring_rho, 16, budget)[0]
+        6, 18, *_zones(CFG), 16, budget)[0]
 
 
 def _card_discs(u0=320.0, v0=240.0, r=12.0):
@@ -218,12 +217,12 @@ def test_ring_evidence_gives_a_card_full_marks_and_less_for_what_a_card_has_not(
 def test_ring_evidence_stops_at_its_budget():
     blobs, ci = _drawn_blobs(_card_discs())
     rho_out = CFG.ring_radii[0] / CFG.centre_dot_radius
-    idx, _, reach = card_kernels.centre_evidence(
+    _, _, reach = card_kernels.centre_evidence(
         blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
         float(blobs.scale), rho_out, 10.0, 6, 16)
     order = np.array([ci, ci, ci], dtype=np.intp)
     score = card_kernels.ring_evidence(
         blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
-        blobs.label, blobs.labels, int(blobs.scale), order, reach, 6, 18, 1.9, 5.9, 16, 1)
+        blobs.label, blobs.labels, int(blobs.scale), order, reach, 6, 18, *_zones(CFG), 16, 1)
     # The first candidate is scored whatever the budget; none after it.
     assert score[0] == 32.0 and np.all(np.isneginf(score[1:]))

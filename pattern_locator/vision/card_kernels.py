@@ -444,25 +444,16 @@ def _median(values):
     """
     Median of values (the middle one, or the mean of the two middle ones), as numpy's.
 
-    A Shell sort of a copy: a few dozen values, and no library sort to
+    A selection on a copy (:func:`_median_in_place`): no library sort to
     compile (numba compiles numpy's sorts anew for every kernel that uses
-    them, seconds each). NaN gives NaN, as numpy's median.
+    them, seconds each). NaN gives NaN, as numpy's median; so does no value.
     """
     n = values.shape[0]
     s = values.copy()
     for k in range(n):
         if s[k] != s[k]:
             return s[k]
-    for gap in (701, 301, 132, 57, 23, 10, 4, 1):
-        for i in range(gap, n):
-            x = s[i]
-            j = i
-            while j >= gap and s[j - gap] > x:
-                s[j] = s[j - gap]
-                j -= gap
-            s[j] = x
-    m = n // 2
-    return s[m] if n % 2 else (s[m - 1] + s[m]) / 2
+    return _median_in_place(s, n)
 
 
 @_kernel
@@ -471,8 +462,8 @@ def _median_in_place(values, n):
     Median of ``values[:n]`` (no NaN), as numpy's; reorders them.
 
     Hoare's selection of the middle value (and, for even ``n``, the largest
-    below it): linear time on average, for the many short lists of
-    :func:`ring_evidence`.
+    below it): linear time on average; :func:`_median` on a copy, and
+    :func:`ring_evidence` on its many short lists.
     """
     if n <= 0:
         return np.nan
@@ -503,19 +494,6 @@ def _median_in_place(values, n):
     for t in range(1, k):
         below = max(below, values[t])
     return (below + middle) / 2
-
-
-@_kernel
-def _first_not_below(sorted_values, x):
-    """First index whose value is not below ``x`` (numpy's ``searchsorted``, side left)."""
-    lo, hi = 0, sorted_values.shape[0]
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if sorted_values[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
 
 
 @_kernel

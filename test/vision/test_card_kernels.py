@@ -170,15 +170,19 @@ def _drawn_blobs(centres_and_radii, size=(480, 640)):
     return blobs, first
 
 
-def _ring_score(blobs, ci, budget=10 ** 6):
+def _ring_scores(blobs, candidates, budget=10 ** 6):
+    """Score ``candidates`` as rank_candidates does, with the reach centre_evidence gives."""
     rho_out = CFG.ring_radii[0] / CFG.centre_dot_radius
-    _, _, reach = card_kernels.centre_evidence(
-        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float),
-        blobs.box, float(blobs.scale), rho_out, 10.0, 6, 16)
+    u, v, area = (blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float))
+    _, _, reach = card_kernels.centre_evidence(u, v, area, blobs.box, float(blobs.scale),
+                                               rho_out, 10.0, 6, 16)
     return card_kernels.ring_evidence(
-        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
-        blobs.label, blobs.labels, int(blobs.scale), np.array([ci], dtype=np.intp), reach,
-        6, 18, *_zones(CFG), 16, budget)[0]
+        u, v, area, blobs.box, blobs.label, blobs.labels, int(blobs.scale),
+        np.asarray(candidates, dtype=np.intp), reach, 6, 18, *_zones(CFG), 16, budget)
+
+
+def _ring_score(blobs, ci):
+    return _ring_scores(blobs, [ci])[0]
 
 
 def _card_discs(u0=320.0, v0=240.0, r=12.0):
@@ -216,13 +220,6 @@ def test_ring_evidence_gives_a_card_full_marks_and_less_for_what_a_card_has_not(
 
 def test_ring_evidence_stops_at_its_budget():
     blobs, ci = _drawn_blobs(_card_discs())
-    rho_out = CFG.ring_radii[0] / CFG.centre_dot_radius
-    _, _, reach = card_kernels.centre_evidence(
-        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
-        float(blobs.scale), rho_out, 10.0, 6, 16)
-    order = np.array([ci, ci, ci], dtype=np.intp)
-    score = card_kernels.ring_evidence(
-        blobs.u.astype(float), blobs.v.astype(float), blobs.area.astype(float), blobs.box,
-        blobs.label, blobs.labels, int(blobs.scale), order, reach, 6, 18, *_zones(CFG), 16, 1)
+    score = _ring_scores(blobs, [ci, ci, ci], budget=1)
     # The first candidate is scored whatever the budget; none after it.
     assert score[0] == 32.0 and np.all(np.isneginf(score[1:]))

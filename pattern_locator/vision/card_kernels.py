@@ -1178,6 +1178,57 @@ def _ink_scatter(unit, ring_valid, slot_letter, n_rings):
     return math.sqrt(total / count) if count else 0.0
 
 
+# A far card's coloured dot of two or three pixels can lose its colour to
+# JPEG's half-resolution chroma and read black in one ring, while the other
+# ring reads the slot's colour. It cannot be point 1 when every ring reads
+# point 1 black in another slot (a ring has one black dot), and it is no
+# black dot when it is lighter than that point 1 by this factor (over its
+# channels: a colour ink absorbs in two channels, black in all three).
+_GREYED_LIGHTER = 0.95
+
+
+@_kernel
+def _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margin):
+    """
+    Leave unseen the dots read black that are a greyed coloured slot (see above).
+
+    Only where point 1 is one slot that every ring reads black, and the
+    slot's other dots agree on one colour, each with ``min_margin`` and
+    whole (not read from the part an object left uncovered): the slot is
+    then read from them, as a slot that one ring sees. ``ring_valid``
+    (rings, 8) is changed in place.
+    """
+    black = -1
+    for k in range(RING_POINTS):
+        every = True
+        for r in range(n_rings):
+            i = 1 + r * RING_POINTS + k
+            every = every and ring_valid[r, k] and letter[i] == 0
+        if every:
+            if black >= 0:
+                return          # two black slots: nothing here is sure
+            black = k
+    if black < 0:
+        return
+    for k in range(RING_POINTS):
+        if k == black:
+            continue
+        ink, sure = 0, True
+        for r in range(n_rings):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k] and letter[i] > 0:
+                sure = sure and (ink == 0 or ink == letter[i]) and margin[i] >= min_margin \
+                    and not partial[i]
+                ink = letter[i]
+        if ink == 0 or not sure:
+            continue
+        for r in range(n_rings):
+            i = 1 + r * RING_POINTS + k
+            if ring_valid[r, k] and letter[i] == 0 and _channel_mean(colour, i) \
+                    < _GREYED_LIGHTER * _channel_mean(colour, 1 + r * RING_POINTS + black):
+                ring_valid[r, k] = False
+
+
 @_kernel
 def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_darkness,
                max_hidden, known_codes, min_margin, decisive_margin, agreed, slot_letter,
@@ -1273,11 +1324,14 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 ring_valid[r, k] = False
     if _hidden_slots(ring_valid) > max_hidden:
         return False
+    _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margin)
     # Both rings must agree, slot by slot: never guess. A slot they read
     # differently is unknown; with a map of the codes that exist
     # (``known_codes``) it is read as a hidden slot is, from the map, else
-    # the card is rejected. (A far card's dots of two or three pixels, their colour
-    # greyed by JPEG's half-resolution chroma, can tip one ring's dot over.)
+    # the card is rejected. (A far card's dots of two or three pixels, their
+    # colour greyed by JPEG's half-resolution chroma, can tip one ring's dot
+    # over: to black, _drop_greyed has already left it unseen where that is
+    # sure.)
     for r in range(n_rings):
         for k in range(RING_POINTS):
             if ring_valid[r, k]:

@@ -167,6 +167,43 @@ def test_one_ring_is_enough_when_the_other_is_hidden_there():
     assert reading.ring_codes[1] == code.ring
 
 
+def greyed(colour, keep=0.15):
+    """Take most of a dot's chroma away (as JPEG's half-resolution chroma does to a far dot)."""
+    mean = colour.mean()
+    return mean + keep * (colour - mean)
+
+
+def test_a_far_dot_greyed_to_black_in_one_ring_is_read_from_the_other():
+    code = CFG.encode(2, 17, 3)                 # K-KRGBGRBB
+    d = seen(code, point1_slot=0, blur=0.9)
+    inner = 1 + RING_POINTS
+    for k in range(1, RING_POINTS):
+        grey = d.copy()
+        grey[inner + k] = greyed(d[inner + k])
+        # Point 1 is black in both rings elsewhere, and the greyed dot is lighter than it.
+        assert read_code(grey, ALL, 2, CFG, PARAMS).code == code, k
+    grey = d.copy()
+    grey[inner + 2] = greyed(d[inner + 2])
+    # A dot as dark as point 1 may be black: the rings disagree, and only a map may tell.
+    dark = grey.copy()
+    dark[inner + 2] = d[inner]
+    assert read_code(dark, ALL, 2, CFG, PARAMS) is None
+    reading = read_code(dark, ALL, 2, CFG, PARAMS, max_hidden=3, known_codes=True)
+    assert reading.code is None and reading.slot_letters[2] == '?'
+    # Point 1 seen black by one ring only (the other's hidden there): no point 1 to go by.
+    hidden = ALL.copy()
+    hidden[inner] = False
+    assert read_code(grey, hidden, 2, CFG, PARAMS) is None
+    # The other ring's colour unclear (halfway between two inks): nothing to read it from.
+    unclear = grey.copy()
+    unclear[1 + 2] = 0.5 * (INKS['G'] + INKS['B']) * 0.9
+    assert read_code(unclear, ALL, 2, CFG, PARAMS) is None
+    # Two slots read black by every ring: no point 1 to go by.
+    two = grey.copy()
+    two[[1 + 5, inner + 5]] = d[1]
+    assert read_code(two, ALL, 2, CFG, PARAMS) is None
+
+
 def test_a_grey_object_over_a_dot_is_not_a_black_point():
     code = CFG.encode(2, 17, 3)
     d = seen(code, point1_slot=0, blur=0.95)

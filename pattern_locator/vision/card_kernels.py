@@ -1183,19 +1183,54 @@ def _ink_scatter(unit, ring_valid, slot_letter, n_rings):
 # ring reads the slot's colour. It cannot be point 1 when every ring reads
 # point 1 black in another slot (a ring has one black dot), and it is no
 # black dot when it is lighter than that point 1 by this factor (over its
-# channels: a colour ink absorbs in two channels, black in all three).
+# channels: a colour ink absorbs in two channels, black in all three). What
+# colour it keeps must lean to the other ring's: such chroma can also turn
+# the other ring's dot to a wrong colour, and then the two disagree still.
 _GREYED_LIGHTER = 0.95
 
 
 @_kernel
-def _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margin):
+def _hue_of(unit, i, refs):
+    """
+    Return the colour ink (1-3) whose hue row ``i``'s direction has; 0 when it has none.
+
+    Hue: the part of a direction across black's (``refs[0]``). Row ``i``'s
+    must lie within 60 degrees of that ink's (the three inks' are about
+    120 degrees apart), however little of it there is.
+    """
+    across = np.empty(3)
+    along = _dot3(unit[i], refs[0])
+    for c in range(3):
+        across[c] = unit[i, c] - along * refs[0, c]
+    size = math.sqrt(_dot3(across, across))
+    if not size > 1e-9:
+        return 0
+    best, best_cos = 0, 0.5
+    ink_across = np.empty(3)
+    for ink in range(1, 4):
+        ink_along = _dot3(refs[ink], refs[0])
+        for c in range(3):
+            ink_across[c] = refs[ink, c] - ink_along * refs[0, c]
+        ink_size = math.sqrt(_dot3(ink_across, ink_across))
+        if not ink_size > 1e-9:
+            continue
+        cos = _dot3(across, ink_across) / (size * ink_size)
+        if cos > best_cos:
+            best, best_cos = ink, cos
+    return best
+
+
+@_kernel
+def _drop_greyed(colour, unit, refs, ring_valid, letter, margin, partial, n_rings, min_margin):
     """
     Leave unseen the dots read black that are a greyed coloured slot (see above).
 
-    Only where point 1 is one slot that every ring reads black, and the
-    slot's other dots agree on one colour, each with ``min_margin`` and
-    whole (not read from the part an object left uncovered): the slot is
-    then read from them, as a slot that one ring sees. ``ring_valid``
+    Only where point 1 is one slot that every ring reads black, the slot's
+    other dots agree on one colour, each with ``min_margin`` and whole (not
+    read from the part an object left uncovered), the greyed dot's direction
+    (``unit``) keeping that ink's hue (``refs``: the inks' directions); and
+    only when every other slot is seen by every ring. The slot is then read
+    from the other dots, as a slot that one ring sees. ``ring_valid``
     (rings, 8) is changed in place.
     """
     black = -1
@@ -1210,6 +1245,7 @@ def _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margi
             black = k
     if black < 0:
         return
+    drop = np.zeros((n_rings, RING_POINTS), dtype=np.bool_)
     for k in range(RING_POINTS):
         if k == black:
             continue
@@ -1224,8 +1260,21 @@ def _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margi
             continue
         for r in range(n_rings):
             i = 1 + r * RING_POINTS + k
-            if ring_valid[r, k] and letter[i] == 0 and _channel_mean(colour, i) \
-                    < _GREYED_LIGHTER * _channel_mean(colour, 1 + r * RING_POINTS + black):
+            drop[r, k] = ring_valid[r, k] and letter[i] == 0 and _channel_mean(colour, i) \
+                < _GREYED_LIGHTER * _channel_mean(colour, 1 + r * RING_POINTS + black) \
+                and _hue_of(unit, i, refs) == ink
+    # Every other slot seen by every ring: a chroma that greys one dot can
+    # turn another to a wrong colour, which only the other ring then shows.
+    for k in range(RING_POINTS):
+        any_drop, every = False, True
+        for r in range(n_rings):
+            any_drop = any_drop or drop[r, k]
+            every = every and ring_valid[r, k]
+        if not any_drop and not every:
+            return
+    for r in range(n_rings):
+        for k in range(RING_POINTS):
+            if drop[r, k]:
                 ring_valid[r, k] = False
 
 
@@ -1324,7 +1373,7 @@ def _read_into(colour, valid, partial, n_rings, inks, light, crosstalk, min_dark
                 ring_valid[r, k] = False
     if _hidden_slots(ring_valid) > max_hidden:
         return False
-    _drop_greyed(colour, ring_valid, letter, margin, partial, n_rings, min_margin)
+    _drop_greyed(colour, unit, refs, ring_valid, letter, margin, partial, n_rings, min_margin)
     # Both rings must agree, slot by slot: never guess. A slot they read
     # differently is unknown; with a map of the codes that exist
     # (``known_codes``) it is read as a hidden slot is, from the map, else

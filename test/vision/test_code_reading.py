@@ -202,6 +202,16 @@ def test_a_far_dot_greyed_to_black_in_one_ring_is_read_from_the_other():
     two = grey.copy()
     two[[1 + 5, inner + 5]] = d[1]
     assert read_code(two, ALL, 2, CFG, PARAMS) is None
+    # The greyed dot keeps another ink's hue than the other ring reads (blue, not green).
+    other = grey.copy()
+    other[inner + 2] = greyed(0.9 * INKS['B'])
+    assert read_code(other, ALL, 2, CFG, PARAMS) is None
+    # Another slot seen by one ring only: the chroma that greyed one dot may
+    # have turned that one's colour, with no second ring to show it.
+    one_ring = ALL.copy()
+    one_ring[1 + 5] = False
+    assert read_code(grey, one_ring, 2, CFG, PARAMS) is None
+    assert read_code(d, one_ring, 2, CFG, PARAMS).code == code
 
 
 def test_a_grey_object_over_a_dot_is_not_a_black_point():

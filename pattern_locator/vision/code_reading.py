@@ -78,7 +78,9 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     Up to ``max_hidden`` slots may be unseen in both rings (an object over
     the card). With ``known_codes`` (a list of the codes that exist will
     complete a partial reading), a slot the two rings read differently
-    counts as one of them; else it rejects the card. One hidden slot and
+    counts as one of them; else it rejects the card (a far dot whose
+    colour JPEG's chroma greyed to black is no disagreement where
+    ``card_kernels._drop_greyed`` can tell). One hidden slot and
     seven coloured ones: the hidden one is point 1 (the one black; not a
     slot the rings read as two colours), and the code is whole. Otherwise the reading
     is partial (``code`` None, ``slot_letters`` with '?' where hidden, and

@@ -194,10 +194,14 @@ def test_a_far_dot_greyed_to_black_in_one_ring_is_read_from_the_other():
     hidden = ALL.copy()
     hidden[inner] = False
     assert read_code(grey, hidden, 2, CFG, PARAMS) is None
-    # The other ring's colour unclear (halfway between two inks): nothing to read it from.
+    # The other ring's colour unclear (half its chroma gone: below the usual
+    # margin): nothing to read it from, and the slot stays one for the map
+    # (not a rejected card).
     unclear = grey.copy()
-    unclear[1 + 2] = 0.5 * (INKS['G'] + INKS['B']) * 0.9
+    unclear[1 + 2] = greyed(d[1 + 2], keep=0.5)
     assert read_code(unclear, ALL, 2, CFG, PARAMS) is None
+    reading = read_code(unclear, ALL, 2, CFG, PARAMS, max_hidden=3, known_codes=True)
+    assert reading.code is None and reading.slot_letters[2] == '?'
     # Two slots read black by every ring: no point 1 to go by.
     two = grey.copy()
     two[[1 + 5, inner + 5]] = d[1]

@@ -331,6 +331,12 @@ def test_found_at_six_to_eight_metres(distance, tilt):
     assert ids_found(image) == [ids]
 
 
+def render_drawn(camera, distance, view, azimuth, roll, offset, ids, options):
+    """Render the card ``ids`` posed as a stress frame is (supersampled twice, as it is)."""
+    T = card_pose_facing(distance, view, azimuth, roll_deg=roll, offset_px=offset, camera=camera)
+    return render([(T, CFG.encode(*ids))], camera, supersample=2, **options)
+
+
 # Two far frames of the stress bench (seeds 21 and 23, their parameters as
 # drawn): JPEG's half-resolution chroma greys a ring dot of 3 px, which one
 # ring reads black.
@@ -358,8 +364,7 @@ FAR_JPEG = [
 def test_far_card_with_a_dot_greyed_by_jpeg_is_read(camera, distance, view, azimuth, roll,
                                                     offset, ids, options):
     """Point 1 is black in both rings elsewhere: the greyed dot is read from the other ring."""
-    T = card_pose_facing(distance, view, azimuth, roll_deg=roll, offset_px=offset, camera=camera)
-    image = render([(T, CFG.encode(*ids))], camera, supersample=2, **options)
+    image = render_drawn(camera, distance, view, azimuth, roll, offset, ids, options)
     assert ids_found(image, camera) == [ids]
 
 
@@ -397,6 +402,5 @@ FAR_SHIFTED_CHROMA = [
 def test_far_card_with_shifted_chroma_gives_no_wrong_id(distance, view, azimuth, roll, offset,
                                                         ids, options):
     """A greyed dot is read from the other ring only when every other slot has both rings."""
-    T = card_pose_facing(distance, view, azimuth, roll_deg=roll, offset_px=offset, camera=VGA)
-    image = render([(T, CFG.encode(*ids))], VGA, supersample=2, **options)
+    image = render_drawn(VGA, distance, view, azimuth, roll, offset, ids, options)
     assert set(ids_found(image)) <= {ids}

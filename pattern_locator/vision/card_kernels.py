@@ -1774,7 +1774,7 @@ def threshold(white, noise, keep_ratio, noise_factor, min_white):
 @_kernel
 def faint_components(stats, centroids, own, max_area, scale, dx, dy):
     """
-    Find the spots of :meth:`.dots.DotImage.faint_spots` from their connected components.
+    Find the faint spots of :func:`faint_rings` from their connected components.
 
     ``stats``, ``centroids``: OpenCV's (row 0 the background); ``own``: the
     label at the centre (0: none). Spots of at most ``max_area`` image
@@ -1796,6 +1796,57 @@ def faint_components(stats, centroids, own, max_area, scale, dx, dy):
             xy[count, 1] = centroids[i, 1] * scale + dy
             count += 1
     return xy[:count].copy(), own_area
+
+
+@_kernel
+def faint_rings(small, us, vs, reach, max_area, white, noise, radius, scale, faint_ratio,
+                min_white, min_spots):
+    """
+    Tell, for each small centre blob, whether faint spots ring it as a far card's dots would.
+
+    :func:`.cards.far_candidates`' look at each of its blobs in one call.
+    For blob ``k`` at image point (``us[k]``, ``vs[k]``): the window of the
+    decimated image ``small`` (H, W, C uint8; ``scale`` image pixels a
+    side per pixel) within ``reach[k]``; its pixels whose darkest channel
+    is below the local white ``white[k]`` by a margin more lenient than the
+    segmentation's (``faint_ratio`` of the white, or 5 sigmas of the full
+    resolution's ``noise[k]`` once decimated, at least 2 levels; none where
+    the white is below ``min_white``); their 8-connected components of at
+    most ``max_area[k]`` image pixels (:func:`faint_components`, the one at
+    the centre left out); and whether those ring the centre
+    (:func:`ring_of_spots` with the centre's ``radius[k]``). Returns per
+    blob (ring-like, number of ring spots, area of the component at its
+    centre in image pixels, 0 if none).
+    """
+    n = us.shape[0]
+    ring_like = np.zeros(n, dtype=np.bool_)
+    n_ring = np.zeros(n, dtype=np.int64)
+    own_area = np.zeros(n)
+    h, w, channels = small.shape
+    none = np.zeros((0, 2))
+    for k in range(n):
+        u, v, r = us[k], vs[k], reach[k]
+        x0, y0 = max(0, int((u - r) / scale)), max(0, int((v - r) / scale))
+        x1 = min(w, int((u + r) / scale) + 2)
+        y1 = min(h, int((v + r) / scale) + 2)
+        spots = none
+        if x1 - x0 >= 3 and y1 - y0 >= 3 and not white[k] < min_white:
+            margin = max(faint_ratio * white[k], 5.0 * noise[k] / scale, 2.0)
+            limit = white[k] - margin
+            mask = np.empty((y1 - y0, x1 - x0), dtype=np.uint8)
+            for y in range(y0, y1):
+                for x in range(x0, x1):
+                    darkest = small[y, x, 0]
+                    for c in range(1, channels):
+                        darkest = min(darkest, small[y, x, c])
+                    mask[y - y0, x - x0] = 255 if darkest < limit else 0
+            labels, stats, centroids = label_components(mask)
+            own = labels[min(int(v / scale), y1 - 1) - y0, min(int(u / scale), x1 - 1) - x0]
+            spots, own_area[k] = faint_components(
+                stats, centroids, own, max_area[k], scale, (x0 + 0.5) * scale - 0.5 - u,
+                (y0 + 0.5) * scale - 0.5 - v)
+        ring_like[k], n_ring[k] = ring_of_spots(spots, radius[k], r, min_spots)
+    return ring_like, n_ring, own_area
 
 
 def warm_up() -> float:
@@ -1844,6 +1895,8 @@ def warm_up() -> float:
     blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)
     faint_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 0, 10.0, 2, 0.0, 0.0)
+    one = np.ones(1)
+    faint_rings(image, one, one, one, one, one, one, one, 2, 0.12, 24, 6)
     return time.perf_counter() - start
 
 

@@ -114,7 +114,7 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     are paler than the segmentation's threshold, so the evidence count of
     :func:`rank_candidates` sees no ring. The darkest small blobs not yet
     examined (``taken``) nor inside a card found (``claimed``) are looked at
-    again with a lenient threshold (:meth:`DotImage.faint_spots`); those
+    again with a lenient threshold (:meth:`DotImage.faint_rings`); those
     with a ring's worth of faint spots round them are candidates. At most
     ``_FAR_TRIES`` windows are looked at and ``_FAR_EXTRA`` returned: the
     cost per image is bounded.
@@ -144,30 +144,23 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
         return np.zeros(0, dtype=np.intp)
     pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]
     rho_out = config.ring_radii[0] / config.centre_dot_radius
-    found = []
-    for k in pick:
-        ci = idx[k]
-        # The reach of rank_candidates, half as big again: a centre this
-        # small, pale at its rim, comes out smaller than it is.
-        radius = math.sqrt(blobs.area[ci] / math.pi)
-        reach = 2.25 * rho_out * max(blobs.extent(ci), radius) + 3.0
-        spots, own = dot_image.faint_spots(float(u[k]), float(v[k]), reach,
-                                           2.0 * blobs.area[ci] + 8.0, float(white[k]),
-                                           float(noise[k]))
-        # A centre dot is a dot, not the darkest part of a bigger dark thing,
-        # and its rings' spots are all round it: in half the eight
-        # directions or more, their mean near the centre.
-        if own > 6.0 * blobs.area[ci]:
-            continue
-        ring_like, n_ring = card_kernels.ring_of_spots(_f64(spots), radius, reach,
-                                                       MIN_NEIGHBOURS)
-        if not ring_like:
-            continue
-        # Darkest first; a crowd of faint spots (more than a card's two
-        # rings and marks, and some) says texture: last.
-        found.append((n_ring > 3 * RING_POINTS, int(ci)))
-    return np.array([ci for _, ci in sorted(found, key=lambda f: f[0])[:_FAR_EXTRA]],
-                    dtype=np.intp)
+    ci = idx[pick]
+    # The reach of rank_candidates, half as big again: a centre this
+    # small, pale at its rim, comes out smaller than it is.
+    radius = np.sqrt(blobs.area[ci] / math.pi)
+    extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
+    reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
+    ring_like, n_ring, own = dot_image.faint_rings(
+        u[pick], v[pick], reach, 2.0 * blobs.area[ci] + 8.0, white[pick], noise[pick], radius,
+        MIN_NEIGHBOURS)
+    # A centre dot is a dot, not the darkest part of a bigger dark thing,
+    # and its rings' spots are all round it: in half the eight directions
+    # or more, their mean near the centre. Darkest first; a crowd of faint
+    # spots (more than a card's two rings and marks, and some) says
+    # texture: last.
+    found = ring_like & ~(own > 6.0 * blobs.area[ci])
+    crowd = n_ring[found] > 3 * RING_POINTS
+    return ci[found][np.argsort(crowd, kind='stable')[:_FAR_EXTRA]].astype(np.intp)
 
 
 def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,

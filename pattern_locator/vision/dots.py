@@ -169,38 +169,34 @@ class DotImage:
         white = self.white_at(u, v) if white is None else white
         return 1.0 - dark / np.maximum(white, 1.0)
 
-    def faint_spots(self, u: float, v: float, reach: float, max_area: float,
-                    white: float, noise: float) -> Tuple[np.ndarray, float]:
+    def faint_rings(self, u: np.ndarray, v: np.ndarray, reach: np.ndarray,
+                    max_area: np.ndarray, white: np.ndarray, noise: np.ndarray,
+                    radius: np.ndarray, min_spots: int
+                    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
-        Find faint dark spots (at most ``max_area`` image pixels) within ``reach`` of (u, v).
+        Tell whether faint dark spots ring each of the small blobs at (u, v).
 
         On the decimated image, with a threshold more lenient than the
         segmentation's (12 % of the local white, or 5 noise sigmas): a far
         card's ring dots, a few pixels across, are too pale once decimated
-        to be blobs, but still darker than the paper round them. ``white``
-        and ``noise`` are :meth:`white_at` and :meth:`noise_at` there. Returns
-        the spots' offsets from (u, v) (image pixels; the spot at (u, v)
-        itself left out) and the area of that spot (0 if (u, v) is not
-        dark at this threshold).
+        to be blobs, but still darker than the paper round them. Per blob:
+        the spots (at most ``max_area`` image pixels) within ``reach`` of
+        it, and whether at least ``min_spots`` of them ring it (beyond 1.5
+        times its ``radius``, all round, their mean near it). ``white`` and
+        ``noise`` are :meth:`white_at` and :meth:`noise_at` there. Returns
+        per blob (ring-like, number of ring spots, area of the spot at the
+        blob itself: 0 if it is not dark at this threshold). One compiled
+        call for all (:func:`.card_kernels.faint_rings`).
         """
-        none = np.zeros((0, 2)), 0.0
-        s = self.scale
-        h, w = self.small.shape[:2]
-        x0, y0 = max(0, int((u - reach) / s)), max(0, int((v - reach) / s))
-        x1, y1 = min(w, int((u + reach) / s) + 2), min(h, int((v + reach) / s) + 2)
-        if x1 - x0 < 3 or y1 - y0 < 3:
-            return none
-        if white < self.params.min_white:
-            return none
-        darkest = _darkest_in(self.small, x0, y0, x1, y1)
-        margin = max(_FAINT_RATIO * white, 5.0 * noise / s, 2.0)
-        mask = cv2.compare(darkest, white - margin, cv2.CMP_LT)
-        labels, stats, centroids = card_kernels.label_components(mask)
-        own = int(labels[min(int(v / s), y1 - 1) - y0, min(int(u / s), x1 - 1) - x0])
-        xy, own_area = card_kernels.faint_components(
-            stats, centroids, own, float(max_area), int(s), (x0 + 0.5) * s - 0.5 - u,
-            (y0 + 0.5) * s - 0.5 - v)
-        return xy, float(own_area)
+        small = (self.small if self.small.ndim == 3 else self.small[:, :, None]).view()
+        small.flags.writeable = False
+        f64 = np.ascontiguousarray
+        return card_kernels.faint_rings(
+            small, f64(u, dtype=np.float64), f64(v, dtype=np.float64),
+            f64(reach, dtype=np.float64), f64(max_area, dtype=np.float64),
+            f64(white, dtype=np.float64), f64(noise, dtype=np.float64),
+            f64(radius, dtype=np.float64), int(self.scale), _FAINT_RATIO,
+            int(self.params.min_white), int(min_spots))
 
     def blobs_in(self, x0: int, y0: int, x1: int, y1: int) -> Blobs:
         """Segment the window [x0, x1) x [y0, y1) again at full resolution."""

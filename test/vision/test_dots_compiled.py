@@ -136,6 +136,65 @@ def test_faint_spots_leave_out_the_own_spot_and_big_ones():
         assert own_area == (area[own - 1] if own > 0 else 0.0)
 
 
+def _faint_ring_numpy(small, u, v, reach, max_area, white, noise, radius, scale):
+    """A far centre's faint ring with OpenCV's calls, one blob at a time (the kernel's spec)."""
+    h, w = small.shape[:2]
+    x0, y0 = max(0, int((u - reach) / scale)), max(0, int((v - reach) / scale))
+    x1, y1 = min(w, int((u + reach) / scale) + 2), min(h, int((v + reach) / scale) + 2)
+    spots, own_area = np.zeros((0, 2)), 0.0
+    if x1 - x0 >= 3 and y1 - y0 >= 3 and white >= 24:
+        window = small[y0:y1, x0:x1]
+        darkest = window if window.ndim == 2 else window.min(axis=2)
+        margin = max(0.12 * white, 5.0 * noise / scale, 2.0)
+        mask = cv2.compare(np.ascontiguousarray(darkest), white - margin, cv2.CMP_LT)
+        _, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+            mask, 8, cv2.CV_32S, cv2.CCL_GRANA)
+        own = int(labels[min(int(v / scale), y1 - 1) - y0, min(int(u / scale), x1 - 1) - x0])
+        spots, own_area = card_kernels.faint_components(
+            stats, centroids, own, max_area, scale, (x0 + 0.5) * scale - 0.5 - u,
+            (y0 + 0.5) * scale - 0.5 - v)
+    ring_like, n_ring = card_kernels.ring_of_spots(spots, radius, reach, 6)
+    return ring_like, n_ring, own_area
+
+
+def test_faint_rings_are_opencvs_components_blob_by_blob():
+    rng = np.random.default_rng(21)
+    rings = 0
+    for trial in range(60):
+        h, w = rng.integers(8, 90, size=2)
+        # Pale spots on paper: some rings of them, some clutter.
+        small = np.full((h, w, 3), 200, dtype=np.uint8)
+        for _ in range(int(rng.integers(0, 40))):
+            y, x = rng.integers(0, h), rng.integers(0, w)
+            small[y:y + 2, x:x + 2] = rng.integers(120, 200, size=3)
+        cy, cx = rng.uniform(0, h), rng.uniform(0, w)
+        for a in np.linspace(0.0, 2 * np.pi, 8, endpoint=False):
+            y, x = int(cy + 6 * np.sin(a)), int(cx + 6 * np.cos(a))
+            small[max(y, 0):max(y + 2, 0), max(x, 0):max(x + 2, 0)] = 150
+        small[int(cy):int(cy) + 3, int(cx):int(cx) + 3] = 60
+        grey = trial % 3 == 0
+        source = np.ascontiguousarray(small[:, :, 1]) if grey else small
+        n = int(rng.integers(1, 8))
+        u = np.append(2 * cx + 2, rng.uniform(-10, 2 * w + 10, n - 1))
+        v = np.append(2 * cy + 2, rng.uniform(-10, 2 * h + 10, n - 1))
+        reach = rng.uniform(0.5, 40.0, n)
+        max_area = rng.uniform(1.0, 60.0, n)
+        white = rng.uniform(10.0, 230.0, n)
+        noise = rng.uniform(0.0, 6.0, n)
+        radius = rng.uniform(0.5, 4.0, n)
+        view = (source if source.ndim == 3 else source[:, :, None]).view()
+        view.flags.writeable = False
+        got = card_kernels.faint_rings(view, u, v, reach, max_area, white, noise, radius, 2,
+                                       0.12, 24, 6)
+        for k in range(n):
+            expected = _faint_ring_numpy(source, u[k], v[k], reach[k], max_area[k], white[k],
+                                         noise[k], radius[k], 2)
+            assert (bool(got[0][k]), int(got[1][k]), float(got[2][k])) == \
+                (bool(expected[0]), int(expected[1]), float(expected[2]))
+        rings += int(np.count_nonzero(got[0]))
+    assert rings > 0        # the rings drawn are found, not only rejections compared
+
+
 def test_one_compiled_signature_per_kernel_after_detections():
     # Each argument-type combination compiles again (seconds): the dots
     # stage passes one, colour or grey, decimated or windowed.
@@ -153,6 +212,7 @@ def test_one_compiled_signature_per_kernel_after_detections():
     assert CardLocator(CFG).locate(image, VGA)[0].T_camera_pattern is not None
     kernels = [card_kernels.bilinear, card_kernels.combed_tiles, card_kernels.dot_components,
                card_kernels.threshold, card_kernels.faint_components,
+               card_kernels.faint_rings,
                card_kernels.label_components, card_kernels.blob_covariance,
                card_kernels.darkest_in,
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,

@@ -358,6 +358,131 @@ def project_points(R, t, obj, K):
 
 
 @_kernel
+def planar_poses(obj, img, K):
+    """
+    IPPE's two poses of a plane seen in the ideal image (Collins and Bartoli, 2014).
+
+    ``obj`` (N, 3) plane points (z = 0), ``img`` (N, 2) their ideal-image
+    pixels, ``K`` the camera matrix. As ``cv2.solvePnPGeneric`` with
+    ``SOLVEPNP_IPPE`` computes: the homography from the points (their
+    centroid the origin) to normalised image points, its Jacobian at the
+    origin, and the two rotations that give that Jacobian to first order
+    (the plane turned towards the camera or away, about the line of
+    sight); each with its least-squares translation. Returns ``(ok, R (2,
+    3, 3), t (2, 3), squared reprojection error (2,), projections (2, N,
+    2))``; ``ok`` False when the points are degenerate or a result is not
+    finite.
+    """
+    n = obj.shape[0]
+    Rs = np.zeros((2, 3, 3))
+    ts = np.zeros((2, 3))
+    errors = np.full(2, np.inf)
+    projected = np.zeros((2, n, 2))
+    if n < 4:
+        return False, Rs, ts, errors, projected
+    cx = cy = 0.0
+    for i in range(n):
+        cx += obj[i, 0]
+        cy += obj[i, 1]
+    cx, cy = cx / n, cy / n
+    plane = np.empty((n, 2))
+    norm = np.empty((n, 2))
+    for i in range(n):
+        plane[i, 0], plane[i, 1] = obj[i, 0] - cx, obj[i, 1] - cy
+        y = (img[i, 1] - K[1, 2]) / K[1, 1]
+        norm[i, 0] = (img[i, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        norm[i, 1] = y
+    ok, H = fit_homography_points(plane, norm)
+    if not ok:
+        return False, Rs, ts, errors, projected
+    # The origin's image v = (p, q, 1) and the Jacobian there.
+    p, q = H[0, 2], H[1, 2]
+    j00, j01 = H[0, 0] - H[2, 0] * p, H[0, 1] - H[2, 1] * p
+    j10, j11 = H[1, 0] - H[2, 0] * q, H[1, 1] - H[2, 1] * q
+    # Rv: the rotation taking the z axis onto v.
+    nv = math.sqrt(p * p + q * q + 1.0)
+    ax, ay, az = p / nv, q / nv, 1.0 / nv
+    d = 1.0 / (1.0 + az)
+    Rv = np.empty((3, 3))
+    Rv[0, 0], Rv[0, 1], Rv[0, 2] = 1.0 - ax * ax * d, -ax * ay * d, ax
+    Rv[1, 0], Rv[1, 1], Rv[1, 2] = -ax * ay * d, 1.0 - ay * ay * d, ay
+    Rv[2, 0], Rv[2, 1], Rv[2, 2] = -ax, -ay, 1.0 - (ax * ax + ay * ay) * d
+    b00, b01 = Rv[0, 0] - p * Rv[2, 0], Rv[0, 1] - p * Rv[2, 1]
+    b10, b11 = Rv[1, 0] - q * Rv[2, 0], Rv[1, 1] - q * Rv[2, 1]
+    det = b00 * b11 - b01 * b10
+    if not abs(det) > 1e-300:
+        return False, Rs, ts, errors, projected
+    a00 = (b11 * j00 - b01 * j10) / det
+    a01 = (b11 * j01 - b01 * j11) / det
+    a10 = (-b10 * j00 + b00 * j10) / det
+    a11 = (-b10 * j01 + b00 * j11) / det
+    # The largest singular value of A scales it to the rotation's 2 x 2 block.
+    s00 = a00 * a00 + a01 * a01
+    s01 = a00 * a10 + a01 * a11
+    s11 = a10 * a10 + a11 * a11
+    gamma = math.sqrt(0.5 * (s00 + s11 + math.sqrt((s00 - s11) ** 2 + 4.0 * s01 * s01)))
+    if not gamma > 1e-12:
+        return False, Rs, ts, errors, projected
+    r00, r01, r10, r11 = a00 / gamma, a01 / gamma, a10 / gamma, a11 / gamma
+    c0 = math.sqrt(max(1.0 - r00 * r00 - r10 * r10, 0.0))
+    c1 = math.sqrt(max(1.0 - r01 * r01 - r11 * r11, 0.0))
+    if -r00 * r01 - r10 * r11 < 0.0:
+        c1 = -c1
+    local = np.empty((3, 3))
+    M = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    for k in range(2):
+        sign = 1.0 if k == 0 else -1.0
+        # Columns: the plane's x and y axes in v's frame, and their cross product.
+        local[0, 0], local[1, 0], local[2, 0] = r00, r10, sign * c0
+        local[0, 1], local[1, 1], local[2, 1] = r01, r11, sign * c1
+        local[0, 2] = local[1, 0] * local[2, 1] - local[2, 0] * local[1, 1]
+        local[1, 2] = local[2, 0] * local[0, 1] - local[0, 0] * local[2, 1]
+        local[2, 2] = local[0, 0] * local[1, 1] - local[1, 0] * local[0, 1]
+        R = _mul3(Rv, local)
+        # The translation (for the centred points) in least squares:
+        # x (r3.P + t3) = r1.P + t1 and y (r3.P + t3) = r2.P + t2.
+        M[:] = 0.0
+        rhs[:] = 0.0
+        for i in range(n):
+            X, Y = plane[i, 0], plane[i, 1]
+            p0 = R[0, 0] * X + R[0, 1] * Y
+            p1 = R[1, 0] * X + R[1, 1] * Y
+            p2 = R[2, 0] * X + R[2, 1] * Y
+            x, y = norm[i, 0], norm[i, 1]
+            # Rows (1, 0, -x) and (0, 1, -y) against x p2 - p0 and y p2 - p1.
+            e0, e1 = x * p2 - p0, y * p2 - p1
+            M[0, 0] += 1.0
+            M[0, 2] -= x
+            M[1, 1] += 1.0
+            M[1, 2] -= y
+            M[2, 2] += x * x + y * y
+            rhs[0] += e0
+            rhs[1] += e1
+            rhs[2] -= x * e0 + y * e1
+        M[2, 0], M[2, 1] = M[0, 2], M[1, 2]
+        solved, t = _solve(M, rhs)
+        if not solved:
+            return False, Rs, ts, errors, projected
+        # Back from the centred points: t - R c.
+        for r in range(3):
+            t[r] -= R[r, 0] * cx + R[r, 1] * cy
+            for col in range(3):
+                Rs[k, r, col] = R[r, col]
+            ts[k, r] = t[r]
+        projected[k] = project_points(R, t, obj, K)
+        total = 0.0
+        for i in range(n):
+            du, dv = projected[k, i, 0] - img[i, 0], projected[k, i, 1] - img[i, 1]
+            total += du * du + dv * dv
+        errors[k] = total
+    finite = True
+    for k in range(2):
+        finite = finite and math.isfinite(errors[k])
+    return finite, Rs, ts, errors, projected
+
+
+@_kernel
 def _plane_homography(R, t, K):
     """``K [r1 r2 t]``: the map from the pattern plane (z = 0) to the ideal image."""
     H = np.empty((3, 3))
@@ -508,6 +633,7 @@ def warm_up() -> None:
     K, R, t = np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0])
     refine_pose(plane, square * 100.0, K, R, t)
     project_points(R, t, plane, K)
+    planar_poses(plane, square * 100.0, K)
     circle_image_centres(R, t, square, np.ones(len(square)), K)
     pose_jacobian(R, t, plane, K)
     point_residuals(R, t, plane, square, K)

@@ -150,3 +150,73 @@ def test_circle_axis_angle_is_the_long_axis_of_the_image_conic():
     K = np.diag([800.0, 800.0, 1.0])
     assert fit_kernels.circle_axis_angle(np.diag([1.0, -1.0, -1.0]), np.array([0, 0, 2.0]), K,
                                          0.113) == 0.0
+
+
+def _opencv_ippe(obj, img, K):
+    """OpenCV's IPPE: the two (R, t) of solvePnPGeneric."""
+    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img.reshape(-1, 1, 2), K, None,
+                                             flags=cv2.SOLVEPNP_IPPE)
+    return [(cv2.Rodrigues(r)[0], t.ravel()) for r, t in list(zip(rvecs, tvecs))[:n]]
+
+
+def test_planar_poses_are_opencvs_ippe_solutions():
+    from pattern_locator.vision.fit_kernels import planar_poses, project_points, refine_pose
+
+    rng = np.random.default_rng(8)
+    obj = PatternConfig().model_points().astype(float)
+    # No skew: OpenCV's projections ignore K[0, 1] (ours take it).
+    K = np.array([[900.0, 0.0, 330.0], [0.0, 910.0, 230.0], [0.0, 0.0, 1.0]])
+    tried = 0
+    for _ in range(400):
+        rvec = rng.normal(0.0, 1.0, 3)
+        rvec *= rng.uniform(0.0, 1.3) / np.linalg.norm(rvec)
+        R0 = cv2.Rodrigues(rvec)[0]
+        t0 = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.4, 0.4), rng.uniform(0.8, 8.0)])
+        if np.any((obj @ R0.T + t0)[:, 2] < 0.3):
+            continue
+        tried += 1
+        exact = project_points(R0, t0, obj, K)
+        sigma = float(rng.choice([0.0, 0.2, 1.0]))
+        img = exact + rng.normal(0.0, sigma, exact.shape)
+        ok, Rs, ts, errors, projected = planar_poses(obj, img, K)
+        assert ok
+        for k in range(2):
+            assert np.allclose(Rs[k] @ Rs[k].T, np.eye(3), atol=1e-12)
+            assert np.linalg.det(Rs[k]) > 0.0
+            assert np.allclose(projected[k], project_points(Rs[k], ts[k], obj, K))
+            assert np.isclose(errors[k], np.sum((projected[k] - img) ** 2), rtol=1e-12, atol=0.0)
+        opencv = _opencv_ippe(obj, img, K)
+        if sigma == 0.0:
+            # Exact points: each of OpenCV's solutions is one of ours, to rounding.
+            for R, t in opencv:
+                near = min(range(2), key=lambda k: np.abs(Rs[k] - R).max())
+                assert np.abs(Rs[near] - R).max() < 1e-9
+                assert np.abs(ts[near] - t).max() < 1e-9 * np.linalg.norm(t)
+        else:
+            # Noisy ones: the homographies differ (OpenCV fits its own), and
+            # the best start fits the points as well as OpenCV's, within 2 %.
+            best_opencv = min(np.sum((project_points(R, t, obj, K) - img) ** 2)
+                              for R, t in opencv)
+            assert errors.min() <= 1.02 * best_opencv
+        # The refinement takes our best start and OpenCV's to the same optimum.
+        best = int(np.argmin(errors))
+        R_ref, t_ref = min(opencv,
+                           key=lambda s: np.sum((project_points(s[0], s[1], obj, K) - img) ** 2))
+        Ra, ta = refine_pose(obj, img, K, Rs[best], ts[best])
+        Rb, tb = refine_pose(obj, img, K, R_ref, t_ref)
+        if np.abs(Rs[best] - R_ref).max() < 0.1:
+            assert np.abs(Ra - Rb).max() < 1e-6 and np.abs(ta - tb).max() < 1e-6
+    assert tried > 300
+
+
+def test_planar_poses_refuse_degenerate_points():
+    from pattern_locator.vision.fit_kernels import planar_poses
+
+    K = np.array([[900.0, 0.0, 320.0], [0.0, 900.0, 240.0], [0.0, 0.0, 1.0]])
+    line = np.column_stack([np.linspace(0.0, 0.2, 6), np.zeros(6), np.zeros(6)])
+    assert not planar_poses(line, line[:, :2] * 900.0 + 300.0, K)[0]
+    obj = PatternConfig().model_points().astype(float)
+    img = np.full((len(obj), 2), 300.0)
+    img[3, 0] = np.nan
+    assert not planar_poses(obj, img, K)[0]
+    assert not planar_poses(obj[:3], img[:3], K)[0]

@@ -360,7 +360,7 @@ def project_points(R, t, obj, K):
 @_kernel
 def planar_poses(obj, img, K):
     """
-    IPPE's two poses of a plane seen in the ideal image (Collins and Bartoli, 2014).
+    Return the two poses IPPE gives a plane seen in the ideal image (Collins and Bartoli, 2014).
 
     ``obj`` (N, 3) plane points (z = 0), ``img`` (N, 2) their ideal-image
     pixels, ``K`` the camera matrix. As ``cv2.solvePnPGeneric`` with

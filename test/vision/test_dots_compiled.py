@@ -137,7 +137,7 @@ def test_faint_spots_leave_out_the_own_spot_and_big_ones():
 
 
 def _faint_ring_numpy(small, u, v, reach, max_area, white, noise, radius, scale):
-    """A far centre's faint ring with OpenCV's calls, one blob at a time (the kernel's spec)."""
+    """Look for a far centre's faint ring with OpenCV's calls, one blob at a time (the spec)."""
     h, w = small.shape[:2]
     x0, y0 = max(0, int((u - reach) / scale)), max(0, int((v - reach) / scale))
     x1, y1 = min(w, int((u + reach) / scale) + 2), min(h, int((v + reach) / scale) + 2)

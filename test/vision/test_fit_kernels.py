@@ -153,7 +153,7 @@ def test_circle_axis_angle_is_the_long_axis_of_the_image_conic():
 
 
 def _opencv_ippe(obj, img, K):
-    """OpenCV's IPPE: the two (R, t) of solvePnPGeneric."""
+    """Return the two (R, t) of OpenCV's IPPE (solvePnPGeneric)."""
     n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img.reshape(-1, 1, 2), K, None,
                                              flags=cv2.SOLVEPNP_IPPE)
     return [(cv2.Rodrigues(r)[0], t.ravel()) for r, t in list(zip(rvecs, tvecs))[:n]]

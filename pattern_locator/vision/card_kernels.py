@@ -718,6 +718,34 @@ def ring_evidence(u, v, area, box, label, labels, scale, idx, reach, min_neighbo
 
 
 @_kernel
+def in_disc(H, pts, reach):
+    """
+    Whether ideal-image points ``pts`` (N, 2) lie within ``reach`` of the plane's origin.
+
+    ``H`` maps the plane to the ideal image; its adjugate maps back (the
+    inverse up to scale, which the division takes away).
+    """
+    a00 = H[1, 1] * H[2, 2] - H[1, 2] * H[2, 1]
+    a01 = H[0, 2] * H[2, 1] - H[0, 1] * H[2, 2]
+    a02 = H[0, 1] * H[1, 2] - H[0, 2] * H[1, 1]
+    a10 = H[1, 2] * H[2, 0] - H[1, 0] * H[2, 2]
+    a11 = H[0, 0] * H[2, 2] - H[0, 2] * H[2, 0]
+    a12 = H[0, 2] * H[1, 0] - H[0, 0] * H[1, 2]
+    a20 = H[1, 0] * H[2, 1] - H[1, 1] * H[2, 0]
+    a21 = H[0, 1] * H[2, 0] - H[0, 0] * H[2, 1]
+    a22 = H[0, 0] * H[1, 1] - H[0, 1] * H[1, 0]
+    n = pts.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        u, v = pts[i, 0], pts[i, 1]
+        w = a20 * u + a21 * v + a22
+        x = (a00 * u + a01 * v + a02) / w
+        y = (a10 * u + a11 * v + a12) / w
+        out[i] = math.hypot(x, y) < reach
+    return out
+
+
+@_kernel
 def ring_of_spots(spots, radius, reach, min_spots):
     """
     Whether faint spots (offsets (N, 2) from a small centre) look like its rings.
@@ -1873,6 +1901,7 @@ def warm_up() -> float:
     ring_evidence(u, u, area, box, label, labels, 2, np.arange(2), reach, 6, 18, 2.0, 6.0, 16,
                   1000)
     ring_of_spots(np.zeros((3, 2)), 1.0, 5.0, 6)
+    in_disc(np.eye(3), np.zeros((2, 2)), 1.0)
     status, slot_blob = group_slots(u, u, area, box, label, labels, 2, 0, ring_rho, 0.5, 64.0,
                                     False)
     slot_points(slot_blob, u, u, 0)

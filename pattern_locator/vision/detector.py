@@ -130,6 +130,10 @@ class Detector:
         # Per card found, made once: slot order -> dot order for each slot of
         # point 1, and the outer ring's plane points.
         self._orders = [_dot_order(config, point1) for point1 in range(RING_POINTS)]
+        self._turns = [rotation_about_z(point1 * np.pi / 4) for point1 in range(RING_POINTS)]
+        # Each code's ids once (None: not a valid code). At most one entry per
+        # code the configuration has: bounded, whatever the uptime.
+        self._ids: Dict[Code, Optional[Ids]] = {}
         self._outer = config.model_points()[1:1 + RING_POINTS, :2]
         half = config.card_size / 2
         # How the card's plane is shared between the windows of its dots: before
@@ -286,8 +290,8 @@ class Detector:
         pts = np.column_stack([u, v])
         if camera is not None and len(pts):
             pts = camera.undistort_pixels(pts)
-        plane = apply_h(np.linalg.inv(card.homography), pts)
-        return np.hypot(plane[:, 0], plane[:, 1]) < reach
+        return card_kernels.in_disc(np.ascontiguousarray(card.homography, dtype=np.float64),
+                                    np.ascontiguousarray(pts, dtype=np.float64), float(reach))
 
     # Centres and code --------------------------------------------------------
 
@@ -325,7 +329,7 @@ class Detector:
             if cfg.handedness_mark is None:
                 return True
             if point1 not in handed:
-                H_turned = H @ rotation_about_z(point1 * np.pi / 4)
+                H_turned = H @ self._turns[point1]
                 handed[point1] = self._handed(dot_image, camera, H_turned, paper, spots, valid,
                                               point1)
             return handed[point1]
@@ -377,27 +381,37 @@ class Detector:
         cfg = self.config
         ids = None
         if code is not None:
-            try:
-                ids = cfg.decode(code)
-            except CodeError:
+            ids = self._ids_of(code)
+            if ids is None:
                 return None
-        H_final = H @ rotation_about_z(point1 * np.pi / 4)
+        H_final = H @ self._turns[point1]
         # Slot order -> dot order (point 1 first).
         order = self._orders[point1 % RING_POINTS]
         points = np.where(valid[order, None], spots.points[order], np.nan)
         areas = np.where(valid[order], spots.area[order], np.nan)
         ring_valid = valid[1:].reshape(cfg.n_rings, RING_POINTS)
-        complete = [r for r in range(cfg.n_rings) if np.all(ring_valid[r])]
-        ring_px = apply_h(H_final, self._outer)
-        if camera is not None and camera.has_distortion:
-            ring_px = camera.distort_pixels(ring_px)
+        complete = np.flatnonzero(ring_valid.all(axis=1)).tolist()
         if complete:
             first = complete[0]
-            seen = [cfg.dot_index(first, k) for k in range(1, RING_POINTS + 1)]
-            ring_px = points[seen]
-        size = 0.5 * float(np.max(np.linalg.norm(ring_px[:, None] - ring_px[None], axis=2)))
+            ring_px = points[1 + first * RING_POINTS:1 + (first + 1) * RING_POINTS]
+        else:
+            ring_px = apply_h(H_final, self._outer)
+            if camera is not None and camera.has_distortion:
+                ring_px = camera.distort_pixels(ring_px)
+        # Half the largest distance between two of the outer ring's points.
+        between = ring_px[:, None] - ring_px[None]
+        size = 0.5 * float(np.sqrt(np.max(np.sum(between * between, axis=2))))
         return CardDetection(code, ids, points, areas, tuple(complete), size, H_final,
                              float(margin), tuple(ring_codes), from_map)
+
+    def _ids_of(self, code: Code) -> Optional[Ids]:
+        """Return the ids ``code`` stands for (None if it stands for none), decoded once."""
+        if code not in self._ids:
+            try:
+                self._ids[code] = self.config.decode(code)
+            except CodeError:
+                self._ids[code] = None
+        return self._ids[code]
 
     def _refit(self, spots: SpotMeasures, camera: Optional[CameraModel]):
         """Homography refitted to the measured dots; drops those off it. (None, None) if lost."""

@@ -144,10 +144,36 @@ def test_one_compiled_signature_per_kernel_after_warm_up_and_a_detection(blobs):
     # with their own types).
     kernels = [getattr(card_kernels, name) for name in (
         'centre_evidence', 'ring_evidence', 'ring_of_spots', 'group_slots', 'slot_points',
-        'homography_inliers', 'read_colours')]
+        'homography_inliers', 'read_colours', 'in_disc')]
     assert all(isinstance(k, numba.core.registry.CPUDispatcher) for k in kernels)
     assert all(len(k.signatures) == 1 for k in kernels), \
         {k.__name__: k.signatures for k in kernels if len(k.signatures) != 1}
+
+
+def test_points_in_a_cards_disc_are_those_the_inverse_map_puts_there():
+    rng = np.random.default_rng(12)
+    disagree = inside = 0
+    for _ in range(300):
+        H = np.array([[rng.uniform(300, 3000), rng.uniform(-500, 500), rng.uniform(0, 1280)],
+                      [rng.uniform(-500, 500), rng.uniform(-3000, -300), rng.uniform(0, 720)],
+                      [rng.uniform(-3, 3), rng.uniform(-3, 3), 1.0]])
+        pts = np.vstack([rng.uniform(-100.0, 1400.0, (40, 2)),
+                         H[:2, 2] + rng.normal(0.0, 60.0, (10, 2))])
+        reach = float(rng.uniform(0.01, 0.3))
+        p = np.column_stack([pts, np.ones(len(pts))]) @ np.linalg.inv(H).T
+        expected = np.hypot(p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]) < reach
+        got = card_kernels.in_disc(H, pts, reach)
+        # The adjugate and LAPACK's inverse differ by rounding: only a point
+        # on the disc's edge to the last bits may go either way.
+        disagree += int(np.count_nonzero(got != expected))
+        inside += int(np.count_nonzero(expected))
+    assert disagree == 0 and inside > 0
+    # Points mapped from the plane: inside and outside by construction.
+    H = np.array([[800.0, 20.0, 320.0], [-10.0, -790.0, 240.0], [0.1, -0.2, 1.0]])
+    plane = np.array([[0.05, 0.0], [0.0, -0.099], [0.101, 0.0], [0.2, 0.2]])
+    image = np.column_stack([plane, np.ones(4)]) @ H.T
+    image = image[:, :2] / image[:, 2:]
+    assert card_kernels.in_disc(H, image, 0.1).tolist() == [True, True, False, False]
 
 
 def test_median_in_place_is_numpys_median():

@@ -23,6 +23,7 @@ are where the card's marks must be dark and their mirror images paper.
 """
 
 from dataclasses import dataclass
+import functools
 from typing import Dict, Iterable, Optional, Sequence, Tuple
 
 import numpy as np
@@ -129,12 +130,22 @@ def read_code(colour: np.ndarray, valid: np.ndarray, n_rings: int, config: Patte
     point1 = black[0]
     slots = [(point1 + i) % RING_POINTS for i in range(RING_POINTS)]
     text = LETTERS[centre] + '-' + 'K' + ''.join(LETTERS[agreed[k]] for k in slots[1:])
-    try:
-        code = Code.parse(text)
-    except CodeError:
+    code = _parsed(text)
+    if code is None:
         return None
     return Reading(point1, code, margin, ring_codes(slot_letter, point1), not_dots, letters,
                    LETTERS[centre], per_slot)
+
+
+@functools.lru_cache(maxsize=None)
+def _parsed(text: str) -> Optional[Code]:
+    """Return the code written ``text`` (None if it is no valid code), parsed once per text."""
+    # At most one entry per string of the letters K R G B in the code's
+    # shape (4 x 4^7): bounded, whatever the uptime.
+    try:
+        return Code.parse(text)
+    except CodeError:
+        return None
 
 
 def ring_codes(slot_letter: np.ndarray, point1: int) -> Tuple[str, ...]:

@@ -18,9 +18,8 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
 """
 
 from dataclasses import dataclass
-import functools
 import math
-from typing import Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -228,14 +227,30 @@ def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternCon
 
 # Internals -----------------------------------------------------------------
 
-@functools.lru_cache(maxsize=8)
+# Per pattern configuration, made once: its dots' plane points and radii.
+# Keyed by identity (hashing a configuration, as lru_cache did, cost more
+# than the look-up saves); at most a few configurations.
+_PER_CONFIG: Dict[int, Tuple[PatternConfig, np.ndarray, np.ndarray]] = {}
+
+
+def _per_config(config: PatternConfig) -> Tuple[PatternConfig, np.ndarray, np.ndarray]:
+    entry = _PER_CONFIG.get(id(config))
+    if entry is None or entry[0] is not config:
+        if len(_PER_CONFIG) >= 8:
+            _PER_CONFIG.clear()
+        entry = (config, config.model_points(), config.dot_radii())
+        for array in entry[1:]:
+            array.flags.writeable = False
+        _PER_CONFIG[id(config)] = entry
+    return entry
+
+
 def _model_points(config: PatternConfig) -> np.ndarray:
-    return config.model_points()
+    return _per_config(config)[1]
 
 
-@functools.lru_cache(maxsize=8)
 def _dot_radii(config: PatternConfig) -> np.ndarray:
-    return config.dot_radii()
+    return _per_config(config)[2]
 
 
 def _f64(a) -> np.ndarray:

@@ -34,7 +34,7 @@ over the inner part of the dot at that shift, well clear of any neighbour.
 """
 
 from dataclasses import dataclass
-from typing import Callable, List, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -185,25 +185,18 @@ class _Windows:
     The windows of a group of spots, measured at once on one image.
 
     Coordinates are the source image's pixels relative to each window's
-    integer origin (``base``); the source is the image (scale 1) or the
-    image decimated by ``scale``, whose pixel (x, y) covers image pixels
-    ``scale * x .. scale * x + scale - 1``. The passes over the windows'
-    pixels are :mod:`.spot_kernels`; their results are kept here.
+    integer origin; the source is the image (scale 1) or the image
+    decimated by ``scale``, whose pixel (x, y) covers image pixels
+    ``scale * x .. scale * x + scale - 1``. What the passes over them
+    (:func:`.spot_kernels.measure`) leave for :func:`_uncovered_part`.
     """
 
-    def __init__(self, dot_image: DotImage, index: np.ndarray, scale: int,
-                 pred: np.ndarray, axes: np.ndarray, semi: np.ndarray,
-                 to_plane: np.ndarray) -> None:
-        source = dot_image.image if scale == 1 else dot_image.small
-        # Grey as one channel, and read-only (a ROS image's buffer is): one
-        # signature for the kernels, not one compiled for each.
-        source = (source if source.ndim == 3 else source[:, :, None]).view()
-        source.flags.writeable = False
-        self.source = source
-        self.index, self.scale = index, scale
-        (self.base, self.size, self.axes, self.pred, self.semi,
-         self.to_plane) = spot_kernels.windows(index, scale, pred, axes, semi, to_plane)
-        self.c = self.pred.copy()
+    def __init__(self, index: np.ndarray, scale: int, size: int, axes: np.ndarray,
+                 pred: np.ndarray, to_plane: np.ndarray, cell: np.ndarray, on_card: np.ndarray,
+                 in_image: np.ndarray) -> None:
+        self.index, self.scale, self.size = index, scale, size
+        self.axes, self.pred, self.to_plane = axes, pred, to_plane
+        self.cell, self.on_card, self.in_image = cell, on_card, in_image
 
     def ellipse(self, c: np.ndarray, semi: np.ndarray) -> np.ndarray:
         """Normalised squared radius (1 on the edge) from centres ``c``, semi-axes ``semi``."""
@@ -214,8 +207,7 @@ class _Windows:
 def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
                   layout: PlaneLayout, spots: np.ndarray, paper: Paper, colour: bool = True,
                   core_margin: Optional[float] = None, refine: bool = True,
-                  enough: Optional[Callable[[np.ndarray], bool]] = None,
-                  min_darkness: Optional[float] = None) -> SpotMeasures:
+                  min_valid: int = 0, min_darkness: Optional[float] = None) -> SpotMeasures:
     """
     Measure the spots ``spots`` (indices into ``layout``) where ``H`` puts them.
 
@@ -226,9 +218,10 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     should be (default: the largest channel shift, plus one). ``refine=False``
     stops after the first, generous windows: enough to tell whether a spot
     is there (the handedness marks), not for a centre to fit to.
-    ``enough`` (given the spots valid after the first windows) stops there
-    when it says no: the refinement only ever drops spots, so a caller that
-    needs more than the first windows found needs nothing more.
+    ``min_valid`` (if above 0) stops there unless the first spot and at
+    least ``min_valid`` spots are valid: the refinement only ever drops
+    spots, so a caller that needs more than the first windows found needs
+    nothing more.
     ``min_darkness`` (default ``params.min_window_darkness``): how much
     darker than the paper a spot must be (a fraction of the white).
     """
@@ -237,7 +230,6 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
         core_margin = params.max_channel_shift_px + 1.0
     spots = np.ascontiguousarray(spots, dtype=np.int64)
     plane_xy, radii = layout.points[spots], layout.radii[spots]
-    n = len(spots)
     # Where the homography puts the spots, and its local linear map there
     # (n, 2, 2 pixels per metre).
     pred, L, probes = spot_kernels.plane_to_image(np.ascontiguousarray(H, dtype=np.float64),
@@ -245,144 +237,123 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     if camera is not None and camera.has_distortion:
         # The lens's local linear map, by differences of one pixel (one call).
         pred, L = spot_kernels.through_lens(camera.distort_pixels(probes), L)
-    out = SpotMeasures(np.full((n, 2), np.nan), pred, np.zeros(n, dtype=bool),
-                       np.zeros(n, dtype=bool), np.zeros(n), np.full((n, 3), np.nan), np.zeros(n),
-                       np.zeros(n, dtype=bool))
     # Window: the spot's ellipse, 1.2 times as big plus a margin for blur
     # and half the channel shift (the darkest channel is the union of the
     # channels' dots), along its own axes. A degenerate homography would
     # ask for windows bigger than the image: memory stays bounded by the
-    # image, nothing is measured.
-    margin = 2.0 + 0.5 * params.max_channel_shift_px
+    # image, nothing is measured. Spots big enough are measured on the
+    # decimated image. Then the passes below, in one compiled call
+    # (spot_kernels.measure).
     h, w = dot_image.image.shape[:2]
-    U, major, minor, semi, Linv, fit = spot_kernels.spot_shapes(
-        np.ascontiguousarray(L, dtype=np.float64), np.ascontiguousarray(radii, dtype=np.float64),
-        margin, np.ascontiguousarray(pred, dtype=np.float64), 0.25 * max(h, w))
-    if not fit:
-        return out
-    big = minor >= _DECIMATED_FROM if dot_image.scale > 1 else np.zeros(n, dtype=bool)
-    groups = [_Windows(dot_image, index, scale, pred, U, semi, Linv)
-              for index, scale in ((np.flatnonzero(~big), 1),
-                                   (np.flatnonzero(big), dot_image.scale)) if len(index)]
-    for g in groups:
-        _first_pass(dot_image, g, layout, spots, pred, major, minor, Linv, paper,
-                    params.min_window_darkness if min_darkness is None else min_darkness,
-                    core_margin, out)
-    # The tolerance of the last pass's test of a dot's centre (spot_kernels.last_pass).
-    out.centred[:] = np.hypot(*(out.points - pred).T) <= np.maximum(1.5, 0.3 * major + 1.0)
-    if not refine or (enough is not None and not enough(out.valid)):
-        return out
-    blur = _blur(groups, U, major, minor, out.valid)
-    for g in groups:
-        _last_pass(g, layout, spots, blur, major, minor, pred, out)
-    if colour and dot_image.image.ndim == 3:
-        _colours(groups, paper.colour, params, major, minor, layout, spots, out)
+    colour = colour and dot_image.image.ndim == 3
+    rows, windows_1, windows_s = spot_kernels.measure(
+        _source(dot_image, 'image'), _source(dot_image, 'small'), int(dot_image.scale), pred, L,
+        np.ascontiguousarray(radii, dtype=np.float64), 2.0 + 0.5 * params.max_channel_shift_px,
+        0.25 * max(h, w), _DECIMATED_FROM, spots, np.ascontiguousarray(plane_xy),
+        layout.owner, layout.half, layout.resolution, dot_image.white, dot_image.grid_step,
+        float(paper.sigma), np.nan if paper.quiet is None else float(paper.quiet),
+        float(params.min_window_darkness if min_darkness is None else min_darkness),
+        float(core_margin), bool(refine), int(min_valid), colour,
+        _colour_table(paper.colour, params.gamma) if colour else _NO_TABLE,
+        float(params.max_channel_shift_px))
+    (_, points, valid, readable, peak, colours, area, inside, partial, centred, major,
+     minor) = rows
+    out = SpotMeasures(points, pred, valid, readable, peak, colours, area, inside, partial,
+                       centred)
+    for scale, (index, size, axes, window_pred, to_plane, cell, on_card, in_image, dark,
+                uncover) in ((1, windows_1), (dot_image.scale, windows_s)):
+        if uncover:
+            g = _Windows(index, scale, size, axes, window_pred, to_plane, cell, on_card,
+                         in_image)
+            _uncovered_part(g, dark, major, minor, layout, spots, out)
     return out
 
 
-def _first_pass(dot_image: DotImage, g: _Windows, layout: PlaneLayout, spots: np.ndarray,
-                pred: np.ndarray, major: np.ndarray, minor: np.ndarray, Linv: np.ndarray,
-                paper: Paper, min_darkness: float, core_margin: float,
-                out: SpotMeasures) -> None:
+def _source(dot_image: DotImage, name: str) -> np.ndarray:
     """
-    Centroid in a generous window, and the tests of a dot, written into ``out``.
+    Return the image or its decimation as the kernels take it: (H, W, C), read-only.
 
-    The darkness (below the local white, less a floor that keeps paper
-    noise out) in the spot's share of the window, on the card inside its
-    edge by two image pixels (blur carries what is beyond onto it) but
-    never closer than a pixel and a half round the spot itself (a steep
-    view brings the edge that close, and cutting the spot's own blur would
-    pull its centre). Its peak (3x3 mean) is taken where the spot should be:
-    a spot that is not there drifts off towards whatever is dark nearby.
+    Grey as one channel, and read-only (a ROS image's buffer is): one
+    signature for the kernels, not one compiled for each. Made once per
+    image.
     """
-    idx, s = g.index, g.scale
-    # Noise of the source image: decimation averages s * s pixels.
-    sigma = np.float32(paper.sigma / s)
-    quiet = sigma if paper.quiet is None else min(sigma, np.float32(paper.quiet / s))
-    (g.pixels, g.in_image, g.raw, g.weight, g.cell, g.window, g.on_card, g.c, g.top,
-     g.spread) = spot_kernels.first_pass(
-        g.source, s, g.base, g.size, idx, g.axes, g.pred, g.semi, g.to_plane, spots,
-        layout.points[spots], layout.owner, layout.half, layout.resolution, major, minor, Linv,
-        dot_image.white_at(pred[:, 0], pred[:, 1]).astype(np.float32), quiet, core_margin,
-        min_darkness, out.points, out.valid, out.peak, out.area, out.inside)
-    g.sigma = sigma
+    key = 'source_' + name
+    source = dot_image._cache.get(key)
+    if source is None:
+        source = getattr(dot_image, name)
+        source = (source if source.ndim == 3 else source[:, :, None]).view()
+        source.flags.writeable = False
+        dot_image._cache[key] = source
+    return source
 
 
-def _blur(groups: List[_Windows], U: np.ndarray, major: np.ndarray, minor: np.ndarray,
-          valid: np.ndarray) -> np.ndarray:
-    """
-    Estimate the image's blur as a covariance (2x2, image pixels^2) from the dots' spread.
-
-    A sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along
-    its axes; blur adds its own covariance to every dot alike (defocus in
-    all directions, motion along one). The median over the dots resists a
-    few spoilt by neighbours or objects. Its eigenvalues are at least 0.1.
-    """
-    spread = np.full((len(valid), 3), np.nan)
-    for g in groups:
-        spread[g.index] = g.spread
-    return spot_kernels.blur(spread, U, major, minor, valid)
-
-
-def _last_pass(g: _Windows, layout: PlaneLayout, spots: np.ndarray, blur: np.ndarray,
-               major: np.ndarray, minor: np.ndarray, pred: np.ndarray,
-               out: SpotMeasures) -> None:
-    """
-    Centroid again in a window just big enough for the dot and the blur.
-
-    The first windows were generous (the blur was unknown) and shared as the
-    prediction put the spots; now they are shared about the measured centre.
-    An object next to a dot, or the card's edge, would pull a centroid taken
-    in a generous window. Dark things in the window apart from the dot (an
-    object a pixel or two away, a neighbour's blur) are not the dot's: its
-    own dark region is the connected one at its centre (dark: a quarter of
-    its peak; the region with the darkest pixel within a pixel and a half
-    of the centre).
-
-    A dot's image is point-symmetric, blurred or not (and so is the union of
-    its colour channels shifted opposite ways); a dot partly hidden, or
-    touched by an object, is not. Its asymmetry is compared where both a
-    pixel and its reflection through the centre (bilinear) belong to the
-    spot, so that sharing pixels with a close neighbour cuts both sides
-    alike: |w - reflected w| / (w + reflected w) summed, less what the pixel
-    noise alone gives (|difference of two noisy pixels| is 1.13 sigma on
-    average). A dot must also stay near its prediction, and its dark region
-    must not reach beyond the dot and its blur (an object touching it).
-    """
-    g.c, g.connected = spot_kernels.last_pass(
-        g.raw, g.on_card, g.weight, g.window, g.top, g.c, g.pred, g.axes, g.base, g.scale,
-        g.index, major, minor, blur, g.sigma, g.to_plane, spots, layout.points[spots],
-        layout.owner, layout.half, layout.resolution, out.points, pred, out.valid, out.readable)
-
-
-def _colours(groups: List[_Windows], white: np.ndarray, params: DetectorParams,
-             major: np.ndarray, minor: np.ndarray, layout: PlaneLayout, spots: np.ndarray,
-             out: SpotMeasures) -> None:
-    """
-    Per-channel darkness of every spot, where that channel's image of it is.
-
-    Each channel's darkness (linear light against the card's white) is
-    averaged over 3x3 pixels and its peak taken within the dot's inner part
-    grown by the largest channel shift: a channel displaced by a pixel or
-    two has its peak displaced, not lowered. The window is shared with the
-    neighbours as the card's plane is, and dark things not joined to the dot
-    are left out, so no neighbour's or object's colour comes in. A dot read
-    for its colour alone (not valid) must be even in every channel there,
-    as the sure dots are: not half ink, half something else.
-    """
+def _colour_table(white: np.ndarray, gamma: float) -> np.ndarray:
+    """Return each level's darkness per channel (256, 3), linear light against the card's white."""
     levels = np.arange(256, dtype=np.float32)[:, None] / np.asarray(white, np.float32)[None, :]
-    table = np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** params.gamma,
-                                 dtype=np.float32)                                 # (256, 3)
-    n = len(out.valid)
-    channel_at = np.full((n, 3, 2), np.nan)
-    strength = np.zeros((n, 3))
-    for g in groups:
-        dark = spot_kernels.colours(
-            g.pixels, table, g.cell, g.window, g.connected, g.axes, g.c, g.pred, g.base,
-            g.scale, g.index, major, minor, params.max_channel_shift_px, out.valid, out.readable,
-            out.colour, channel_at, strength)
-        _uncovered_part(g, dark, major, minor, layout, spots, out)
-    _undo_channel_shift(channel_at, strength, params.max_channel_shift_px, out)
+    return np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** gamma, dtype=np.float32)
+
+
+# The table of an image without colour (the kernels' argument, not read).
+_NO_TABLE = np.zeros((256, 3), dtype=np.float32)
+
+
+# What the passes of spot_kernels.measure measure, and why (the kernels do
+# the arithmetic; this is their specification).
+#
+# First pass: a centroid in a generous window, and the tests of a dot. The
+# darkness (below the local white, less a floor that keeps paper noise out)
+# in the spot's share of the window, on the card inside its edge by two
+# image pixels (blur carries what is beyond onto it) but never closer than
+# a pixel and a half round the spot itself (a steep view brings the edge
+# that close, and cutting the spot's own blur would pull its centre). Its
+# peak (3x3 mean) is taken where the spot should be: a spot that is not
+# there drifts off towards whatever is dark nearby. The noise of the
+# decimated image is the image's over the scale (it averages scale^2
+# pixels).
+#
+# Blur, as a covariance (2x2, image pixels^2) from the dots' spread: a
+# sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along its
+# axes; blur adds its own covariance to every dot alike (defocus in all
+# directions, motion along one). The median over the dots resists a few
+# spoilt by neighbours or objects. Its eigenvalues are at least 0.1.
+#
+# Last pass: the centroid again in a window just big enough for the dot and
+# the blur. The first windows were generous (the blur was unknown) and
+# shared as the prediction put the spots; now they are shared about the
+# measured centre. An object next to a dot, or the card's edge, would pull
+# a centroid taken in a generous window. Dark things in the window apart
+# from the dot (an object a pixel or two away, a neighbour's blur) are not
+# the dot's: its own dark region is the connected one at its centre (dark:
+# a quarter of its peak; the region with the darkest pixel within a pixel
+# and a half of the centre). A dot's image is point-symmetric, blurred or
+# not (and so is the union of its colour channels shifted opposite ways); a
+# dot partly hidden, or touched by an object, is not. Its asymmetry is
+# compared where both a pixel and its reflection through the centre
+# (bilinear) belong to the spot, so that sharing pixels with a close
+# neighbour cuts both sides alike: |w - reflected w| / (w + reflected w)
+# summed, less what the pixel noise alone gives (|difference of two noisy
+# pixels| is 1.13 sigma on average). A dot must also stay near its
+# prediction, and its dark region must not reach beyond the dot and its
+# blur (an object touching it).
+#
+# Colours: per-channel darkness of every spot, where that channel's image
+# of it is. Each channel's darkness (linear light against the card's
+# white) is averaged over 3x3 pixels and its peak taken within the dot's
+# inner part grown by the largest channel shift: a channel displaced by a
+# pixel or two has its peak displaced, not lowered. The window is shared
+# with the neighbours as the card's plane is, and dark things not joined to
+# the dot are left out, so no neighbour's or object's colour comes in. A
+# dot read for its colour alone (not valid) must be even in every channel
+# there, as the sure dots are: not half ink, half something else.
+#
+# Every dot's centre is then put where its green image is. With red and
+# blue shifted against green (a cheap lens, composite video), the darkest
+# channel's image of a dot lies between the images of the channels the ink
+# is dark in: somewhere else for each ink, which the homography would take
+# for error. The card's shifts (red and blue against green, the median
+# over the dots dark in both) tell each dot's offset, which is taken away.
+# That moves centres only; the colours of dots partly covered by an object
+# (_uncovered_part, after the call) read and write colours only.
 
 
 def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,
@@ -485,21 +456,6 @@ def _paper(g: _Windows, j: int, layout: PlaneLayout, spots: np.ndarray) -> np.nd
                           qy[..., None] - layout.points[:, 1]) - layout.radii, axis=-1)
     edge = layout.half - np.maximum(np.abs(qx), np.abs(qy))
     return (ink > room) & (edge > room) & g.in_image[j]
-
-
-def _undo_channel_shift(channel_at: np.ndarray, strength: np.ndarray, limit: float,
-                        out: SpotMeasures) -> None:
-    """
-    Put every dot's centre where its green image is.
-
-    With red and blue shifted against green (a cheap lens, composite video),
-    the darkest channel's image of a dot lies between the images of the
-    channels the ink is dark in: somewhere else for each ink, which the
-    homography would take for error. The card's shifts (red and blue
-    against green, the median over the dots dark in both) tell each dot's
-    offset, which is taken away.
-    """
-    spot_kernels.undo_channel_shift(channel_at, strength, limit, out.valid, out.points)
 
 
 def _load_kernels() -> None:

@@ -52,6 +52,8 @@ __all__ = ['CardDetection', 'Detector', 'DetectorParams']
 _MIN_CENTRE_FILL = 0.8
 # Blobs beyond which a found card's covered blobs are sought in a box first.
 _FEW_BLOBS = 150
+# Dots a homography is refitted to, the centre among them.
+_REFIT_MIN = 7
 # 64 points round the unit circle: a found card's outer disc, for the box of
 # the blobs it may cover (Detector._covered).
 _UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2 * np.pi, 64, endpoint=False)),
@@ -304,7 +306,7 @@ class Detector:
         if paper is None:
             return None
         spots = measure_spots(dot_image, camera, H, self._dot_layout, self._dots, paper,
-                              colour=not dot_image.grey_only, enough=_refittable)
+                              colour=not dot_image.grey_only, min_valid=_REFIT_MIN)
         H, valid = self._refit(spots, camera)
         if H is None:
             return None
@@ -487,7 +489,7 @@ def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:
 
 def _refittable(valid: np.ndarray) -> bool:
     """Tell whether measured dots (``valid``, centre first) are enough to refit the homography."""
-    return bool(valid[0]) and np.count_nonzero(valid) >= 7
+    return bool(valid[0]) and np.count_nonzero(valid) >= _REFIT_MIN
 
 
 def _paper_points(config: PatternConfig) -> np.ndarray:

@@ -27,7 +27,7 @@ image) before calling.
 import numba
 import numpy as np
 
-from .card_kernels import _h_jacobian, _map_point, _median
+from .card_kernels import _h_jacobian, _map_point, _median, bilinear as _bilinear
 
 _F32 = np.float32
 
@@ -584,6 +584,165 @@ def last_pass(raw, on_card, first_weight, window, top, centres, pred, axes, base
         even = relative[k] <= 1.3 * typical + 0.03 and minor[i] >= 2.5
         readable[i] = valid[i] or (exists[k] and steady[k] and even)
     return out_c, connected
+
+
+@numba.njit(cache=True, nogil=False)
+def _group_indices(minor, big_from, big):
+    """Spots whose semi-minor axis is at least ``big_from`` (``big``) or below it (not ``big``)."""
+    n = minor.shape[0]
+    out = np.empty(n, dtype=np.int64)
+    count = 0
+    for i in range(n):
+        if (minor[i] >= big_from) == big:
+            out[count] = i
+            count += 1
+    return out[:count].copy()
+
+
+@numba.njit(cache=True, nogil=False)
+def _first_group(source, scale, index, pred, U, semi, Linv, spots, plane_xy, owner, half,
+                 resolution, major, minor, white_level, paper_sigma, paper_quiet, core_margin,
+                 min_darkness, points, valid, peak, area, inside):
+    """Lay out one group's windows and take their first pass (:func:`first_pass`)."""
+    base, size, axes, wpred, wsemi, to_plane = windows(index, scale, pred, U, semi, Linv)
+    # Noise of the source image: decimation averages scale * scale pixels.
+    sigma = _F32(paper_sigma / scale)
+    quiet = sigma
+    if not np.isnan(paper_quiet):
+        quiet = min(sigma, _F32(paper_quiet / scale))
+    (pixels, in_image, raw, weight, cell, window, on_card, centres, top,
+     spread) = first_pass(source, scale, base, size, index, axes, wpred, wsemi, to_plane,
+                          spots, plane_xy, owner, half, resolution, major, minor, Linv,
+                          white_level, quiet, core_margin, min_darkness, points, valid, peak,
+                          area, inside)
+    return (base, size, axes, wpred, to_plane, pixels, in_image, raw, weight, cell, window,
+            on_card, centres, top, spread, sigma)
+
+
+@numba.njit(cache=True, nogil=False)
+def _uncover(index, minor, valid, readable, partial, inside):
+    """
+    Whether a group has dots whose colour may show in part (:func:`.centres._uncovered_part`).
+
+    At least three sure dots, and one that is not readable or was read
+    although touched, whole in the image and big enough (2.5 pixels).
+    """
+    sure = 0
+    todo = False
+    for k in range(index.shape[0]):
+        i = index[k]
+        sure += valid[i]
+        fit = inside[i] and minor[i] >= 2.5
+        todo = todo or (fit and (not readable[i] or (not valid[i] and not partial[i])))
+    return sure >= 3 and todo
+
+
+@numba.njit(cache=True, nogil=False)
+def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from, spots,
+            plane_xy, owner, half, resolution, white_grid, grid_step, paper_sigma, paper_quiet,
+            min_darkness, core_margin, refine, min_valid, colour, table, max_shift):
+    """
+    Measure spots where their predicted centres ``pred`` are: every pass, in one call.
+
+    What :func:`.centres.measure_spots` orchestrates, which says why: the
+    spots' image ellipses (:func:`spot_shapes`, from the local linear maps
+    ``L``, the spots' ``radii`` and the windows' ``margin``; nothing is
+    measured when a window would be bigger than ``largest``); the spots
+    whose semi-minor axis is at least ``big_from`` measured on ``small``
+    (the image decimated by ``small_scale``), the others on ``image``
+    (both (H, W, C) uint8); the first pass (:func:`first_pass`, against
+    the local white ``white_grid`` (float32, ``grid_step`` pixels a cell)
+    and the paper's noise ``paper_sigma`` and ``paper_quiet`` (NaN: none));
+    then, when ``refine`` and (``min_valid`` > 0) the first spot and at
+    least ``min_valid`` are valid, the blur (:func:`blur`) and the last
+    pass (:func:`last_pass`); when ``colour``, the colours
+    (:func:`colours`, with the darkness ``table``) and the channels'
+    shift (:func:`undo_channel_shift`).
+
+    Returns ``(fit, points, valid, readable, peak, colour, area, inside,
+    partial, centred, major, minor)`` (:class:`.centres.SpotMeasures`'
+    rows) and, for the groups on the image and on ``small``, each window's
+    ``(index, size, axes, pred, to_plane, cell, on_card, in_image,
+    darkness, uncover)``: what :func:`.centres._uncovered_part` reads of
+    a group whose ``uncover`` (:func:`_uncover`) says it has work.
+    """
+    n = pred.shape[0]
+    points = np.full((n, 2), np.nan)
+    valid = np.zeros(n, dtype=np.bool_)
+    readable = np.zeros(n, dtype=np.bool_)
+    peak = np.zeros(n)
+    colour_out = np.full((n, 3), np.nan)
+    area = np.zeros(n)
+    inside = np.zeros(n, dtype=np.bool_)
+    partial = np.zeros(n, dtype=np.bool_)
+    centred = np.ones(n, dtype=np.bool_)
+    U, major, minor, semi, Linv, fit = spot_shapes(L, radii, margin, pred, largest)
+    if not fit:
+        # Nothing measured: groups of no spots (their windows are empty).
+        index1 = np.zeros(0, dtype=np.int64)
+        index2 = np.zeros(0, dtype=np.int64)
+    elif small_scale > 1:
+        index1 = _group_indices(minor, big_from, False)
+        index2 = _group_indices(minor, big_from, True)
+    else:
+        index1 = np.arange(n)
+        index2 = np.zeros(0, dtype=np.int64)
+    white_level = np.empty(n, dtype=np.float32)
+    if fit:
+        white = _bilinear(white_grid, pred[:, 0].copy(), pred[:, 1].copy(), grid_step)
+        for i in range(n):
+            white_level[i] = _F32(white[i])
+    g1 = _first_group(image, 1, index1, pred, U, semi, Linv, spots, plane_xy, owner, half,
+                      resolution, major, minor, white_level, paper_sigma, paper_quiet,
+                      core_margin, min_darkness, points, valid, peak, area, inside)
+    g2 = _first_group(small, small_scale, index2, pred, U, semi, Linv, spots, plane_xy, owner,
+                      half, resolution, major, minor, white_level, paper_sigma, paper_quiet,
+                      core_margin, min_darkness, points, valid, peak, area, inside)
+    # The tolerance of the last pass's test of a dot's centre (last_pass).
+    for i in range(n if fit else 0):
+        reach = 0.3 * major[i] + 1.0
+        centred[i] = np.hypot(points[i, 0] - pred[i, 0], points[i, 1] - pred[i, 1]) \
+            <= (reach if reach > 1.5 else 1.5)
+    dark1 = np.zeros((0, g1[1], g1[1], 3), dtype=np.float32)
+    dark2 = np.zeros((0, g2[1], g2[1], 3), dtype=np.float32)
+    uncover1 = uncover2 = False
+    count = 0
+    for i in range(n):
+        count += valid[i]
+    enough = min_valid <= 0 or (n > 0 and valid[0] and count >= min_valid)
+    if fit and refine and enough:
+        spread = np.full((n, 3), np.nan)
+        for k in range(index1.shape[0]):
+            spread[index1[k]] = g1[14][k]
+        for k in range(index2.shape[0]):
+            spread[index2[k]] = g2[14][k]
+        blurred = blur(spread, U, major, minor, valid)
+        c1, connected1 = last_pass(g1[7], g1[11], g1[8], g1[10], g1[13], g1[12], g1[3], g1[2],
+                                   g1[0], 1, index1, major, minor, blurred, g1[15], g1[4],
+                                   spots, plane_xy, owner, half, resolution, points, pred,
+                                   valid, readable)
+        c2, connected2 = last_pass(g2[7], g2[11], g2[8], g2[10], g2[13], g2[12], g2[3], g2[2],
+                                   g2[0], small_scale, index2, major, minor, blurred, g2[15],
+                                   g2[4], spots, plane_xy, owner, half, resolution, points,
+                                   pred, valid, readable)
+        if colour:
+            channel_at = np.full((n, 3, 2), np.nan)
+            strength = np.zeros((n, 3))
+            dark1 = colours(g1[5], table, g1[9], g1[10], connected1, g1[2], c1, g1[3], g1[0], 1,
+                            index1, major, minor, max_shift, valid, readable, colour_out,
+                            channel_at, strength)
+            dark2 = colours(g2[5], table, g2[9], g2[10], connected2, g2[2], c2, g2[3], g2[0],
+                            small_scale, index2, major, minor, max_shift, valid, readable,
+                            colour_out, channel_at, strength)
+            # The shift moves centres only; the uncovered parts (after this
+            # call) read and write colours only.
+            undo_channel_shift(channel_at, strength, max_shift, valid, points)
+            uncover1 = _uncover(index1, minor, valid, readable, partial, inside)
+            uncover2 = _uncover(index2, minor, valid, readable, partial, inside)
+    return ((fit, points, valid, readable, peak, colour_out, area, inside, partial, centred,
+             major, minor),
+            (index1, g1[1], g1[2], g1[3], g1[4], g1[9], g1[11], g1[6], dark1, uncover1),
+            (index2, g2[1], g2[2], g2[3], g2[4], g2[9], g2[11], g2[6], dark2, uncover2))
 
 
 @numba.njit(cache=True, nogil=False)

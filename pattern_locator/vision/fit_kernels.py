@@ -32,6 +32,8 @@ import math
 import numba
 import numpy as np
 
+from .card_kernels import _pairwise_sum
+
 # As card_kernels: compiled once per installation, numpy's arithmetic, the GIL kept.
 _kernel = numba.njit(cache=True, nogil=False, error_model='numpy')
 
@@ -567,6 +569,44 @@ def point_residuals(R, t, obj, img, K):
 
 
 @_kernel
+def refine_exact(obj, observed, K, R, t, projected, radii, bias_correction, min_outlier,
+                 outlier_factor):
+    """
+    Refine the chosen planar solution (R, t) and find the dots off the fit.
+
+    :func:`.pose_exact.estimate_exact`'s last steps in one call: the dots'
+    centres corrected from image-ellipse centres to projected circle
+    centres (when ``bias_correction``; the offset from the start's
+    ``projected`` points), the Levenberg-Marquardt refinement
+    (:func:`refine_pose`), each dot's residual, and the dots more than
+    ``min_outlier`` pixels and ``outlier_factor`` times the median residual
+    off. Returns ``(R, t, residual, outliers, sum of squared residuals)``,
+    the sum in numpy's order.
+    """
+    n = obj.shape[0]
+    corrected = observed
+    if bias_correction:
+        xy = np.empty((n, 2))
+        for i in range(n):
+            xy[i, 0], xy[i, 1] = obj[i, 0], obj[i, 1]
+        centres = circle_image_centres(R, t, xy, radii, K)
+        corrected = np.empty((n, 2))
+        for i in range(n):
+            for a in range(2):
+                corrected[i, a] = observed[i, a] - (centres[i, a] - projected[i, a])
+    R, t = refine_pose(obj, corrected, K, R, t)
+    residual = point_residuals(R, t, obj, corrected, K)
+    median = np.sort(residual)[n // 2]
+    limit = max(min_outlier, outlier_factor * median)
+    outliers = np.empty(n, dtype=np.bool_)
+    squares = np.empty(n)
+    for i in range(n):
+        outliers[i] = residual[i] > limit
+        squares[i] = residual[i] ** 2
+    return R, t, residual, outliers, _pairwise_sum(squares, n)
+
+
+@_kernel
 def pose_covariance_matrix(R, t, obj, K, sigma):
     """
     ``sigma^2 (J^T J)^-1`` (6x6) with J :func:`pose_jacobian`; all inf when J^T J is singular.
@@ -637,6 +677,8 @@ def warm_up() -> None:
     circle_image_centres(R, t, square, np.ones(len(square)), K)
     pose_jacobian(R, t, plane, K)
     point_residuals(R, t, plane, square, K)
+    refine_exact(plane, square * 100.0, K, R, t, square * 100.0, np.ones(len(square)), True,
+                 0.2, 5.0)
     pose_covariance_matrix(R, t, plane, K, 1.0)
     circle_axis_angle(R, t, K, 1.0)
 

@@ -26,7 +26,8 @@ import numpy as np
 
 from .camera import CameraModel
 from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
-                          point_residuals, pose_covariance_matrix, project_points, refine_pose)
+                          point_residuals, pose_covariance_matrix, project_points,
+                          refine_exact, refine_pose)
 from .geometry import Pose
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
@@ -129,26 +130,22 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
-    # (Each candidate carries its projection, made for its residual.)
+    # (Each candidate carries its projection, made for its residual.) The
+    # centres' bias correction depends only weakly on the pose: computed
+    # from IPPE's pose it leaves a bias far below the noise after the
+    # refinement. A dot partly hidden by an occluder or merged with a
+    # neighbour keeps a centre far off the others' fit: drop it and solve
+    # again. (fit_kernels.refine_exact.)
     _, R, t, projected = candidates[best]
-    corrected = observed
-    if bias_correction:
-        # The offset depends only weakly on the pose: computed from IPPE's
-        # pose it leaves a bias far below the noise after the refinement.
-        corrected = observed - (circle_image_centres(R, t, _f64(obj[:, :2]), radii, K)
-                                - projected)
-    R, t = refine_pose(obj, corrected, K, R, t)
-    residual = point_residuals(R, t, obj, corrected, K)
-    # A dot partly hidden by an occluder or merged with a neighbour keeps a
-    # centre far off the others' fit: drop it and solve again.
-    median = float(np.partition(residual, n // 2)[n // 2])
-    outliers = residual > max(MIN_OUTLIER_PX, OUTLIER_FACTOR * median)
-    if np.any(outliers) and n - np.count_nonzero(outliers) >= MIN_POINTS:
+    R, t, residual, outliers, ss = refine_exact(
+        obj, _f64(observed), K, _f64(R), _f64(t), _f64(projected), _f64(radii),
+        bool(bias_correction), MIN_OUTLIER_PX, OUTLIER_FACTOR)
+    dropped = int(np.count_nonzero(outliers))
+    if dropped and n - dropped >= MIN_POINTS:
         cleaned = points_px.copy()
         cleaned[np.flatnonzero(seen)[outliers]] = np.nan
         return estimate_exact(cleaned, camera, config, prior, pixel_sigma, bias_correction,
                               ambiguity_threshold)
-    ss = float(np.sum(residual ** 2))
     pose = Pose(R, t)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)

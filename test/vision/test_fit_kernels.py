@@ -220,3 +220,35 @@ def test_planar_poses_refuse_degenerate_points():
     img[3, 0] = np.nan
     assert not planar_poses(obj, img, K)[0]
     assert not planar_poses(obj[:3], img[:3], K)[0]
+
+
+def test_refine_exact_is_its_numpy_steps():
+    from pattern_locator.vision.fit_kernels import (circle_image_centres, planar_poses,
+                                                    point_residuals, project_points,
+                                                    refine_exact, refine_pose)
+
+    rng = np.random.default_rng(13)
+    cfg = PatternConfig()
+    obj, radii = cfg.model_points().astype(float), cfg.dot_radii().astype(float)
+    K = np.array([[1000.0, 0.0, 320.0], [0.0, 1000.0, 240.0], [0.0, 0.0, 1.0]])
+    dropped = 0
+    for _ in range(200):
+        rvec = rng.normal(0.0, 0.5, 3)
+        t0 = np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(1.0, 6.0)])
+        img = project_points(cv2.Rodrigues(rvec)[0], t0, obj, K) + rng.normal(0.0, 0.3, (17, 2))
+        if rng.random() < 0.3:
+            img[int(rng.integers(0, 17))] += rng.normal(0.0, 8.0, 2)    # a dot off the fit
+        _, Rs, ts, _, projected = planar_poses(obj, img, K)
+        R, t, residual, outliers, ss = refine_exact(obj, img, K, Rs[0], ts[0], projected[0],
+                                                    radii, True, 0.2, 5.0)
+        corrected = img - (circle_image_centres(Rs[0], ts[0], obj[:, :2].copy(), radii, K)
+                           - projected[0])
+        R_np, t_np = refine_pose(obj, corrected, K, Rs[0], ts[0])
+        res_np = point_residuals(R_np, t_np, obj, corrected, K)
+        median = float(np.partition(res_np, 8)[8])
+        assert np.array_equal(R, R_np) and np.array_equal(t, t_np)
+        assert np.array_equal(residual, res_np)
+        assert np.array_equal(outliers, res_np > max(0.2, 5.0 * median))
+        assert ss == float(np.sum(res_np ** 2))
+        dropped += int(outliers.any())
+    assert dropped > 20

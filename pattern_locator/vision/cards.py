@@ -26,7 +26,7 @@ from . import card_kernels
 from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
-from .fit_kernels import fit_homography_points
+from .fit_kernels import fit_homography_inliers
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.
@@ -280,22 +280,10 @@ def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_erro
     """
     if len(obj) < min_points:
         return None, None
-    obj, img, radii = _f64(obj), _f64(img), _f64(radii)
-    max_error, min_tolerance = float(max_error), float(min_tolerance)
-    inliers = np.ones(len(obj), dtype=bool)
-    tol = np.empty(len(obj))
-    for step in range(4):
-        ok, H = fit_homography_points(obj[inliers], img[inliers])
-        if not ok:
-            return None, None
-        ok, now, count, same = card_kernels.homography_inliers(
-            H, obj, img, radii, max_error, min_tolerance, tol, inliers, step == 0)
-        if not ok or count < min_points or not now[-1]:
-            return None, None
-        if same:
-            break
-        inliers = now
-    return H, inliers
+    # The rounds in one compiled call (fit_kernels.fit_homography_inliers).
+    ok, H, inliers = fit_homography_inliers(_f64(obj), _f64(img), _f64(radii), float(max_error),
+                                            float(min_tolerance), int(min_points))
+    return (H, inliers) if ok else (None, None)
 
 
 def apply_h(H: np.ndarray, xy: np.ndarray) -> np.ndarray:

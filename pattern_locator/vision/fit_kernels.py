@@ -32,7 +32,7 @@ import math
 import numba
 import numpy as np
 
-from .card_kernels import _pairwise_sum
+from .card_kernels import _pairwise_sum, homography_inliers
 
 # As card_kernels: compiled once per installation, numpy's arithmetic, the GIL kept.
 _kernel = numba.njit(cache=True, nogil=False, error_model='numpy')
@@ -110,6 +110,49 @@ def fit_homography_points(obj, img):
             if not abs(H[r, c]) < np.inf:
                 return False, np.zeros((3, 3))
     return True, H
+
+
+@_kernel
+def fit_homography_inliers(obj, img, radii, max_error, min_tolerance, min_points):
+    """
+    Homography from plane points to pixels, refitted without the points off it.
+
+    :func:`.cards.fit_homography`'s rounds in one call: fit to the points
+    kept (:func:`fit_homography_points`), keep those on the fit
+    (:func:`.card_kernels.homography_inliers`, tolerances set on the first
+    fit), up to four fits, until the kept points stay the same. Returns
+    ``(ok, H, inliers)``; ``ok`` False when a fit fails, fewer than
+    ``min_points`` points stay on it or the last point (the centre) is off.
+    """
+    n = obj.shape[0]
+    inliers = np.ones(n, dtype=np.bool_)
+    tol = np.empty(n)
+    H = np.zeros((3, 3))
+    if n < min_points:
+        return False, H, inliers
+    for step in range(4):
+        m = 0
+        for i in range(n):
+            m += inliers[i]
+        kept_obj = np.empty((m, 2))
+        kept_img = np.empty((m, 2))
+        k = 0
+        for i in range(n):
+            if inliers[i]:
+                kept_obj[k, 0], kept_obj[k, 1] = obj[i, 0], obj[i, 1]
+                kept_img[k, 0], kept_img[k, 1] = img[i, 0], img[i, 1]
+                k += 1
+        ok, H = fit_homography_points(kept_obj, kept_img)
+        if not ok:
+            return False, H, inliers
+        ok, now, count, same = homography_inliers(H, obj, img, radii, max_error, min_tolerance,
+                                                  tol, inliers, step == 0)
+        if not ok or count < min_points or not now[n - 1]:
+            return False, H, inliers
+        if same:
+            break
+        inliers = now
+    return True, H, inliers
 
 
 @_kernel
@@ -669,6 +712,7 @@ def warm_up() -> None:
     """Compile (or load from the cache) the kernels with the argument types the detector uses."""
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, 0.4]])
     fit_homography_points(square, square * 2.0 + 1.0)
+    fit_homography_inliers(square, square * 2.0 + 1.0, np.ones(len(square)), 1.0, 0.75, 4)
     plane = np.column_stack([square, np.zeros(len(square))])
     K, R, t = np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0])
     refine_pose(plane, square * 100.0, K, R, t)

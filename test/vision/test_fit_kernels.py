@@ -252,3 +252,48 @@ def test_refine_exact_is_its_numpy_steps():
         assert ss == float(np.sum(res_np ** 2))
         dropped += int(outliers.any())
     assert dropped > 20
+
+
+def _fit_rounds_numpy(obj, img, radii, max_error, min_tolerance, min_points):
+    """Refit without the points off the fit, one kernel call a step (the kernel's spec)."""
+    from pattern_locator.vision.card_kernels import homography_inliers
+
+    inliers = np.ones(len(obj), dtype=bool)
+    tol = np.empty(len(obj))
+    for step in range(4):
+        ok, H = fit_homography_points(obj[inliers], img[inliers])
+        if not ok:
+            return None
+        ok, now, count, same = homography_inliers(H, obj, img, radii, max_error, min_tolerance,
+                                                  tol, inliers, step == 0)
+        if not ok or count < min_points or not now[-1]:
+            return None
+        if same:
+            break
+        inliers = now
+    return H, inliers
+
+
+def test_homography_rounds_drop_the_points_off_the_fit_as_one_step_at_a_time():
+    from pattern_locator.vision.fit_kernels import fit_homography_inliers
+
+    rng = np.random.default_rng(17)
+    dropped = refused = 0
+    for _ in range(400):
+        n = int(rng.integers(6, 18))
+        obj = rng.uniform(-0.12, 0.12, (n, 2))
+        H0 = np.array([[rng.uniform(300, 3000), rng.uniform(-500, 500), rng.uniform(0, 1280)],
+                       [rng.uniform(-500, 500), rng.uniform(300, 3000), rng.uniform(0, 720)],
+                       [rng.uniform(-3, 3), rng.uniform(-3, 3), 1.0]])
+        img = _project(H0, obj) + rng.normal(0.0, 0.3, (n, 2))
+        for _ in range(int(rng.integers(0, 4))):
+            img[int(rng.integers(0, n))] += rng.normal(0.0, 20.0, 2)
+        radii = np.full(n, 0.01)
+        expected = _fit_rounds_numpy(obj, img, radii, 0.25, 0.75, 6)
+        ok, H, inliers = fit_homography_inliers(obj, img, radii, 0.25, 0.75, 6)
+        assert ok == (expected is not None)
+        if ok:
+            assert np.array_equal(H, expected[0]) and np.array_equal(inliers, expected[1])
+            dropped += int(not inliers.all())
+        refused += int(not ok)
+    assert dropped > 50 and refused > 10

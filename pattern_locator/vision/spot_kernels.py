@@ -4,9 +4,10 @@ Compiled per-pixel passes of the sub-pixel centres (:mod:`.centres`).
 The centres stage measures a card's 17 dots in windows of some 25 x 25
 pixels. As numpy calls over all of a card's windows at once, its time was
 the fixed cost of a few hundred small calls per card, not the pixels; here
-each pass over a group of windows is one call that loops over the windows,
-then their pixels. What is measured, and why, is :mod:`.centres`'s
-documentation; these kernels only do its arithmetic.
+each pass over a group of windows is a loop over the windows, then their
+pixels, and :func:`measure` runs all the passes of a card's spots in one
+call. What is measured, and why, is :mod:`.centres`'s documentation; these
+kernels only do its arithmetic.
 
 The per-pixel quantities are computed in float32 in the same order as the
 numpy code they replace (so that a pixel on an ellipse's edge or a

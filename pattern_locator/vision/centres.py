@@ -245,7 +245,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     # decimated image. Then the passes below, in one compiled call
     # (spot_kernels.measure).
     h, w = dot_image.image.shape[:2]
-    colour = colour and dot_image.image.ndim == 3
+    colour = bool(colour and dot_image.image.ndim == 3)
     rows, windows_1, windows_s = spot_kernels.measure(
         _source(dot_image, 'image'), _source(dot_image, 'small'), int(dot_image.scale), pred, L,
         np.ascontiguousarray(radii, dtype=np.float64), 2.0 + 0.5 * params.max_channel_shift_px,

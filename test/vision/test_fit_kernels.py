@@ -12,14 +12,19 @@ def _project(H, obj):
     return p[:, :2] / p[:, 2:]
 
 
+def _random_homography(rng):
+    """Return a plane-to-image map of a card somewhere in a 1280x720 view, steep or not."""
+    return np.array([[rng.uniform(300, 3000), rng.uniform(-500, 500), rng.uniform(0, 1280)],
+                     [rng.uniform(-500, 500), rng.uniform(300, 3000), rng.uniform(0, 720)],
+                     [rng.uniform(-3, 3), rng.uniform(-3, 3), 1.0]])
+
+
 def test_the_fit_is_opencvs_least_squares_homography():
     rng = np.random.default_rng(3)
     for _ in range(500):
         n = int(rng.integers(4, 20))
         obj = rng.uniform(-0.15, 0.15, (n, 2))
-        H0 = np.array([[rng.uniform(300, 3000), rng.uniform(-500, 500), rng.uniform(0, 1280)],
-                       [rng.uniform(-500, 500), rng.uniform(300, 3000), rng.uniform(0, 720)],
-                       [rng.uniform(-3, 3), rng.uniform(-3, 3), 1.0]])
+        H0 = _random_homography(rng)
         img = _project(H0, obj) + rng.normal(0.0, rng.choice([0.01, 0.3, 2.0]), (n, 2))
         expected, _ = cv2.findHomography(obj, img, 0)
         ok, H = fit_homography_points(obj, img)
@@ -282,9 +287,7 @@ def test_homography_rounds_drop_the_points_off_the_fit_as_one_step_at_a_time():
     for _ in range(400):
         n = int(rng.integers(6, 18))
         obj = rng.uniform(-0.12, 0.12, (n, 2))
-        H0 = np.array([[rng.uniform(300, 3000), rng.uniform(-500, 500), rng.uniform(0, 1280)],
-                       [rng.uniform(-500, 500), rng.uniform(300, 3000), rng.uniform(0, 720)],
-                       [rng.uniform(-3, 3), rng.uniform(-3, 3), 1.0]])
+        H0 = _random_homography(rng)
         img = _project(H0, obj) + rng.normal(0.0, 0.3, (n, 2))
         for _ in range(int(rng.integers(0, 4))):
             img[int(rng.integers(0, n))] += rng.normal(0.0, 20.0, 2)

@@ -125,11 +125,9 @@ def card_paper(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray
     # is the median centre pixel; the noise the median of each patch's mean
     # |pixel - 3x3 mean| in the darkest channel, sqrt(8/9) sqrt(2/pi) = 0.75
     # sigma for white noise.
-    source = dot_image.image
-    source = (source if source.ndim == 3 else source[:, :, None]).view()
-    source.flags.writeable = False
     white, spread, roomy_spread = spot_kernels.paper_noise(
-        source, np.ascontiguousarray(pts, dtype=np.float64), np.ascontiguousarray(roomy))
+        dot_image.kernel_view(decimated=False), np.ascontiguousarray(pts, dtype=np.float64),
+        np.ascontiguousarray(roomy))
     if np.max(white) < dot_image.params.min_white:
         return None
     sigma = float(spread) / 0.75
@@ -247,7 +245,8 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
     h, w = dot_image.image.shape[:2]
     colour = bool(colour and dot_image.image.ndim == 3)
     rows, windows_1, windows_s = spot_kernels.measure(
-        _source(dot_image, 'image'), _source(dot_image, 'small'), int(dot_image.scale), pred, L,
+        dot_image.kernel_view(decimated=False), dot_image.kernel_view(decimated=True),
+        int(dot_image.scale), pred, L,
         np.ascontiguousarray(radii, dtype=np.float64), 2.0 + 0.5 * params.max_channel_shift_px,
         0.25 * max(h, w), _DECIMATED_FROM, spots, np.ascontiguousarray(plane_xy),
         layout.owner, layout.half, layout.resolution, dot_image.white, dot_image.grid_step,
@@ -267,24 +266,6 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
                          in_image)
             _uncovered_part(g, dark, major, minor, layout, spots, out)
     return out
-
-
-def _source(dot_image: DotImage, name: str) -> np.ndarray:
-    """
-    Return the image or its decimation as the kernels take it: (H, W, C), read-only.
-
-    Grey as one channel, and read-only (a ROS image's buffer is): one
-    signature for the kernels, not one compiled for each. Made once per
-    image.
-    """
-    key = 'source_' + name
-    source = dot_image._cache.get(key)
-    if source is None:
-        source = getattr(dot_image, name)
-        source = (source if source.ndim == 3 else source[:, :, None]).view()
-        source.flags.writeable = False
-        dot_image._cache[key] = source
-    return source
 
 
 def _colour_table(white: np.ndarray, gamma: float) -> np.ndarray:

@@ -188,15 +188,29 @@ class DotImage:
         blob itself: 0 if it is not dark at this threshold). One compiled
         call for all (:func:`.card_kernels.faint_rings`).
         """
-        small = (self.small if self.small.ndim == 3 else self.small[:, :, None]).view()
-        small.flags.writeable = False
-        f64 = np.ascontiguousarray
+        u, v, reach, max_area, white, noise, radius = (
+            np.ascontiguousarray(a, dtype=np.float64)
+            for a in (u, v, reach, max_area, white, noise, radius))
         return card_kernels.faint_rings(
-            small, f64(u, dtype=np.float64), f64(v, dtype=np.float64),
-            f64(reach, dtype=np.float64), f64(max_area, dtype=np.float64),
-            f64(white, dtype=np.float64), f64(noise, dtype=np.float64),
-            f64(radius, dtype=np.float64), int(self.scale), _FAINT_RATIO,
-            int(self.params.min_white), int(min_spots))
+            self.kernel_view(decimated=True), u, v, reach, max_area, white, noise, radius,
+            int(self.scale), _FAINT_RATIO, int(self.params.min_white), int(min_spots))
+
+    def kernel_view(self, decimated: bool) -> np.ndarray:
+        """
+        Return the image (or its decimation) as the kernels take it: (H, W, C), read-only.
+
+        Grey as one channel, and read-only (a ROS image's buffer is): one
+        signature for the kernels, not one compiled for each. Made once per
+        image.
+        """
+        key = 'view_small' if decimated else 'view_image'
+        view = self._cache.get(key)
+        if view is None:
+            source = self.small if decimated else self.image
+            view = (source if source.ndim == 3 else source[:, :, None]).view()
+            view.flags.writeable = False
+            self._cache[key] = view
+        return view
 
     def blobs_in(self, x0: int, y0: int, x1: int, y1: int) -> Blobs:
         """Segment the window [x0, x1) x [y0, y1) again at full resolution."""

@@ -27,6 +27,7 @@ from .camera import CameraModel
 from .detector_params import DetectorParams
 from .dots import Blobs, DotImage
 from .fit_kernels import fit_homography_inliers
+from .per_config import made_once
 from ..card.pattern import PatternConfig, RING_POINTS
 
 # Candidate centres: at least this big (image pixels), and this many neighbours.
@@ -217,45 +218,41 @@ def _verify(blobs: Blobs, ci: int, slot_blob: np.ndarray, config: PatternConfig,
     return CardGuess(ci, slot_blob, H, blobs)
 
 
-# Per pattern configuration, made once: (config, ring radii in centre-dot radii,
-# slot-ordered plane points (ring r slot k at row r * 8 + k, the centre last),
-# their dots' radii). Keyed by identity: hashing a configuration costs more
-# than the work it saves.
-_PER_CONFIG: Dict[int, Tuple[PatternConfig, np.ndarray, np.ndarray, np.ndarray]] = {}
+# Per pattern configuration, made once (per_config.made_once): ring radii in
+# centre-dot radii, slot-ordered plane points (ring r slot k at row r * 8 + k,
+# the centre last), their dots' radii, and the zones of _zones.
+_PER_CONFIG: Dict[int, Tuple[PatternConfig, tuple]] = {}
 
 
 def _ring_rho(config: PatternConfig) -> np.ndarray:
     """Return the rings' radii in centre-dot radii."""
-    return _per_config(config)[1]
+    return _per_config(config)[0]
 
 
 def _zones(config: PatternConfig) -> Tuple[float, float]:
     """Return how far round the centre its paper is bare, and its rings reach, in centre radii."""
-    return _per_config(config)[4:6]
+    return _per_config(config)[3:5]
 
 
 def _slot_plane(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
     """Return the slot-ordered plane points (the centre last) and their dots' radii."""
-    return _per_config(config)[2:4]
+    return _per_config(config)[1:3]
 
 
-def _per_config(config: PatternConfig):
-    entry = _PER_CONFIG.get(id(config))
-    if entry is None or entry[0] is not config:
-        n_ring = config.n_rings * RING_POINTS
-        entry = (config,
-                 np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius,
-                 np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]]),
-                 np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius),
-                 # Bare paper round the centre, in centre radii: most of the
-                 # way to the inner ring's dots' inner edges; the rings' zone:
-                 # the outer ring's dots and a dot's width beyond.
-                 0.8 * (config.ring_radii[-1] - config.ring_dot_radius) / config.centre_dot_radius,
-                 (config.ring_radii[0] + 2 * config.ring_dot_radius) / config.centre_dot_radius)
-        if len(_PER_CONFIG) >= 16:
-            _PER_CONFIG.clear()
-        _PER_CONFIG[id(config)] = entry
-    return entry
+def _per_config(config: PatternConfig) -> tuple:
+    return made_once(_PER_CONFIG, config, _config_geometry)
+
+
+def _config_geometry(config: PatternConfig) -> tuple:
+    n_ring = config.n_rings * RING_POINTS
+    return (np.array(config.ring_radii, dtype=np.float64) / config.centre_dot_radius,
+            np.vstack([config.model_points()[1:, :2], [[0.0, 0.0]]]),
+            np.append(np.full(n_ring, config.ring_dot_radius), config.centre_dot_radius),
+            # Bare paper round the centre, in centre radii: most of the way
+            # to the inner ring's dots' inner edges; the rings' zone: the
+            # outer ring's dots and a dot's width beyond.
+            0.8 * (config.ring_radii[-1] - config.ring_dot_radius) / config.centre_dot_radius,
+            (config.ring_radii[0] + 2 * config.ring_dot_radius) / config.centre_dot_radius)
 
 
 def _f64(a: np.ndarray) -> np.ndarray:

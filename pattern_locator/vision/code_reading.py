@@ -31,6 +31,7 @@ import numpy as np
 from . import card_kernels
 from .centres import SpotMeasures
 from .detector_params import DetectorParams
+from .per_config import made_once
 from ..card.pattern import Code, PatternConfig, RING_POINTS, srgb_to_linear
 from ..errors import CodeError
 
@@ -234,20 +235,14 @@ def sole_hypothesis(reading: Reading, fitting: Sequence[Tuple[Code, int]],
     return code, p
 
 
-# Per pattern configuration (by identity: hashing one costs more than the
-# work saved), its inks' darkness.
+# Per pattern configuration (per_config.made_once), its inks' darkness.
 _INKS: Dict[int, Tuple[PatternConfig, np.ndarray]] = {}
 
 
 def _inks(config: PatternConfig) -> np.ndarray:
     """Return :func:`ink_darkness` of ``config``, made once."""
-    entry = _INKS.get(id(config))
-    if entry is None or entry[0] is not config:
-        if len(_INKS) >= 16:
-            _INKS.clear()
-        entry = _INKS[id(config)] = (config, np.ascontiguousarray(ink_darkness(config),
-                                                                  dtype=np.float64))
-    return entry[1]
+    return made_once(_INKS, config, lambda c: np.ascontiguousarray(ink_darkness(c),
+                                                                   dtype=np.float64))
 
 
 # The camera's colour response (card_kernels.fit_response), fitted to the

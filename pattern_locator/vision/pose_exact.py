@@ -29,6 +29,7 @@ from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
                           point_residuals, pose_covariance_matrix, project_points,
                           refine_exact, refine_pose)
 from .geometry import Pose
+from .per_config import made_once
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
 
@@ -224,30 +225,28 @@ def paper_angles(T_camera_pattern: Pose, camera: CameraModel, config: PatternCon
 
 # Internals -----------------------------------------------------------------
 
-# Per pattern configuration, made once: its dots' plane points and radii.
-# Keyed by identity (hashing a configuration, as lru_cache did, cost more
-# than the look-up saves); at most a few configurations.
-_PER_CONFIG: Dict[int, Tuple[PatternConfig, np.ndarray, np.ndarray]] = {}
+# Per pattern configuration, made once (per_config.made_once; lru_cache
+# hashed the configuration on every pose): its dots' plane points and radii.
+_PER_CONFIG: Dict[int, Tuple[PatternConfig, Tuple[np.ndarray, np.ndarray]]] = {}
 
 
-def _per_config(config: PatternConfig) -> Tuple[PatternConfig, np.ndarray, np.ndarray]:
-    entry = _PER_CONFIG.get(id(config))
-    if entry is None or entry[0] is not config:
-        if len(_PER_CONFIG) >= 8:
-            _PER_CONFIG.clear()
-        entry = (config, config.model_points(), config.dot_radii())
-        for array in entry[1:]:
-            array.flags.writeable = False
-        _PER_CONFIG[id(config)] = entry
-    return entry
+def _per_config(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
+    return made_once(_PER_CONFIG, config, _dots_of)
+
+
+def _dots_of(config: PatternConfig) -> Tuple[np.ndarray, np.ndarray]:
+    points, radii = config.model_points(), config.dot_radii()
+    points.flags.writeable = False
+    radii.flags.writeable = False
+    return points, radii
 
 
 def _model_points(config: PatternConfig) -> np.ndarray:
-    return _per_config(config)[1]
+    return _per_config(config)[0]
 
 
 def _dot_radii(config: PatternConfig) -> np.ndarray:
-    return _per_config(config)[2]
+    return _per_config(config)[1]
 
 
 def _f64(a) -> np.ndarray:

@@ -424,26 +424,38 @@ def test_zoom_direct_timing_continuous_zoom_and_inquiry(link, camera):
     assert camera.state().zoom_units == 0x3FF
 
 
-def test_reset_sweeps_through_the_ends_and_refuses_commands(link, camera):
-    link.send(visca.pan_tilt_absolute(1, 0x18, 0x14, 100, 50))
-    link.expect(h('90 41 FF'))
-    link.expect(h('90 51 FF'))
-    sent = link.send(visca.pan_tilt_reset(1))
-    link.expect(h('90 41 FF'))
-    assert camera.state().initialising
-    assert link.ask(visca.pan_tilt_drive(1, 1, 1, visca.PAN_LEFT, visca.TILT_STOP)) \
-        == h('90 62 41 FF')
-    assert link.ask(visca.inquiry_pan_tilt_mode(1))[2] == 0x14
-    highest = lowest = 0.0
-    while 1 in camera.state().sockets_busy:
-        highest = max(highest, camera.state().pan_units)
-        lowest = min(lowest, camera.state().pan_units)
-        time.sleep(0.002)
-    done = link.expect(h('90 51 FF'))
-    assert 0.3 < done - sent < 0.3 + 2 * FIELD_S + 0.02 + SLACK_S
-    assert highest > 700 and lowest < -700
-    assert position(link) == (0, 0)
-    assert not camera.state().initialising
+def test_reset_sweeps_through_the_ends_and_refuses_commands(tmp_path):
+    # A sweep of 1.2 s: its ends pass at some 3,000 units a second, so the
+    # samples below (every 2 ms, but tens of ms apart on a loaded machine)
+    # still see them; at 0.3 s a 16 ms gap missed the end by 200 units.
+    reset_s = 1.2
+    with EmulatedEviD31(init_s=0.03, reset_s=reset_s,
+                        link_path=str(tmp_path / 'ttyVISCA')) as camera:
+        ready(camera)
+        link = Link(camera.port)
+        link.setup()
+        try:
+            link.send(visca.pan_tilt_absolute(1, 0x18, 0x14, 100, 50))
+            link.expect(h('90 41 FF'))
+            link.expect(h('90 51 FF'))
+            sent = link.send(visca.pan_tilt_reset(1))
+            link.expect(h('90 41 FF'))
+            assert camera.state().initialising
+            assert link.ask(visca.pan_tilt_drive(1, 1, 1, visca.PAN_LEFT, visca.TILT_STOP)) \
+                == h('90 62 41 FF')
+            assert link.ask(visca.inquiry_pan_tilt_mode(1))[2] == 0x14
+            highest = lowest = 0.0
+            while 1 in camera.state().sockets_busy:
+                highest = max(highest, camera.state().pan_units)
+                lowest = min(lowest, camera.state().pan_units)
+                time.sleep(0.002)
+            done = link.expect(h('90 51 FF'))
+            assert reset_s < done - sent < reset_s + 2 * FIELD_S + 0.02 + SLACK_S
+            assert highest > 700 and lowest < -700
+            assert position(link) == (0, 0)
+            assert not camera.state().initialising
+        finally:
+            link.close()
 
 
 def test_power_off_and_on(link, camera):

@@ -835,30 +835,33 @@ def _dot3(x, y):
 
 
 @_kernel
-def _solve3(A, b):
-    """Solution of the 3x3 system A x = b (Gaussian elimination, partial pivoting)."""
-    M = A.copy()
+def _solve(M, b):
+    """Solve the square system M x = b (Gaussian elimination, partial pivoting): (ok, x)."""
+    n = b.shape[0]
+    A = M.copy()
     x = b.copy()
-    for col in range(3):
-        p = col
-        for r in range(col + 1, 3):
-            if abs(M[r, col]) > abs(M[p, col]):
-                p = r
-        if p != col:
-            for c in range(3):
-                M[col, c], M[p, c] = M[p, c], M[col, c]
-            x[col], x[p] = x[p], x[col]
-        for r in range(col + 1, 3):
-            f = M[r, col] / M[col, col]
-            for c in range(col, 3):
-                M[r, c] -= f * M[col, c]
+    for col in range(n):
+        pivot = col
+        for r in range(col + 1, n):
+            if abs(A[r, col]) > abs(A[pivot, col]):
+                pivot = r
+        if not abs(A[pivot, col]) > 1e-300:
+            return False, x
+        if pivot != col:
+            for c in range(n):
+                A[col, c], A[pivot, c] = A[pivot, c], A[col, c]
+            x[col], x[pivot] = x[pivot], x[col]
+        for r in range(col + 1, n):
+            f = A[r, col] / A[col, col]
+            for c in range(col, n):
+                A[r, c] -= f * A[col, c]
             x[r] -= f * x[col]
-    for r in range(2, -1, -1):
-        s = x[r]
-        for c in range(r + 1, 3):
-            s -= M[r, c] * x[c]
-        x[r] = s / M[r, r]
-    return x
+    for col in range(n - 1, -1, -1):
+        total = x[col]
+        for c in range(col + 1, n):
+            total -= A[col, c] * x[c]
+        x[col] = total / A[col, col]
+    return True, x
 
 
 @_kernel
@@ -888,7 +891,11 @@ def fit_response(darkness, inks, light, crosstalk):
         for i in range(3):
             for j in range(3):
                 mix[i, j] = tt / 2.0 + (1.0 - 1.5 * tt if i == j else 0.0)
-        lights = _solve3(mix, light)
+        # Singular only at t = 2/3 (its eigenvalues are 1 and 1 - 1.5 t); the
+        # callers' crosstalks stop at 0.6.
+        solved, lights = _solve(mix, light)
+        if not solved:
+            lights = light.copy()
         for j in range(3):
             lights[j] = max(lights[j], 0.05 * light_max)
         for i in range(3):

@@ -37,7 +37,7 @@ import math
 import numba
 import numpy as np
 
-from .card_kernels import _pairwise_sum, homography_inliers
+from .card_kernels import _pairwise_sum, _solve, homography_inliers
 
 # As card_kernels: compiled once per installation, numpy's arithmetic, the GIL kept.
 _kernel = numba.njit(cache=True, nogil=False, error_model='numpy')
@@ -251,36 +251,6 @@ def _damped_step(JtJ, Jtr, lam):
     for a in range(M.shape[0]):
         M[a, a] += lam * (JtJ[a, a] + 1e-12)
     return _solve(M, Jtr)
-
-
-@_kernel
-def _solve(M, b):
-    """Solve the square system M x = b (Gaussian elimination, partial pivoting): (ok, x)."""
-    n = b.shape[0]
-    A = M.copy()
-    x = b.copy()
-    for col in range(n):
-        pivot = col
-        for r in range(col + 1, n):
-            if abs(A[r, col]) > abs(A[pivot, col]):
-                pivot = r
-        if not abs(A[pivot, col]) > 1e-300:
-            return False, x
-        if pivot != col:
-            for c in range(n):
-                A[col, c], A[pivot, c] = A[pivot, c], A[col, c]
-            x[col], x[pivot] = x[pivot], x[col]
-        for r in range(col + 1, n):
-            f = A[r, col] / A[col, col]
-            for c in range(col, n):
-                A[r, c] -= f * A[col, c]
-            x[r] -= f * x[col]
-    for col in range(n - 1, -1, -1):
-        total = x[col]
-        for c in range(col + 1, n):
-            total -= A[col, c] * x[c]
-        x[col] = total / A[col, col]
-    return True, x
 
 
 @_kernel

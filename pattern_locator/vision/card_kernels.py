@@ -88,9 +88,9 @@ def blob_covariance(labels, box, label, scale):
     """
     Second central moments (image pixels^2) of one component: (xx, xy, yy).
 
-    As :meth:`.dots.Blobs.covariance` (OpenCV's moments of the component's
-    mask, plus a pixel's own 1/12) from integer sums over its box, clipped
-    to the label image.
+    OpenCV's moments of the component's mask (the tests' reference), plus
+    a pixel's own 1/12, from integer sums over its box, clipped to the
+    label image.
     """
     h, w = labels.shape
     x0 = min(max(int(box[0]), 0), w)

@@ -60,16 +60,6 @@ class Blobs:
     def __len__(self) -> int:
         return len(self.u)
 
-    def covariance(self, j: int) -> np.ndarray:
-        """Second central moments (image pixels^2) of component ``j``."""
-        x, y, w, h = (int(c) for c in self.box[j])
-        m = cv2.moments((self.labels[y:y + h, x:x + w] == self.label[j]).view(np.uint8),
-                        binaryImage=True)
-        a = max(m['m00'], 1.0)
-        s2 = float(self.scale * self.scale)
-        return s2 * np.array([[m['mu20'] / a + 1 / 12, m['mu11'] / a],
-                              [m['mu11'] / a, m['mu02'] / a + 1 / 12]])
-
     def extent(self, j: int) -> float:
         """Half the longer side of component ``j``'s box, image pixels."""
         return 0.5 * self.scale * float(max(self.box[j, 2], self.box[j, 3]))

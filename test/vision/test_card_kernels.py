@@ -50,10 +50,21 @@ def test_angles_wrap_as_numpy_wraps_them():
     assert np.array_equal(got.view(np.int64), expected.view(np.int64))
 
 
+def _opencv_covariance(blobs, j: int) -> np.ndarray:
+    """Second central moments (image pixels^2) of component ``j``, from OpenCV's moments."""
+    x, y, w, h = (int(c) for c in blobs.box[j])
+    m = cv2.moments((blobs.labels[y:y + h, x:x + w] == blobs.label[j]).view(np.uint8),
+                    binaryImage=True)
+    a = max(m['m00'], 1.0)
+    s2 = float(blobs.scale * blobs.scale)
+    return s2 * np.array([[m['mu20'] / a + 1 / 12, m['mu11'] / a],
+                          [m['mu11'] / a, m['mu02'] / a + 1 / 12]])
+
+
 def test_blob_shape_matches_opencv_moments_and_lapack(blobs):
     assert len(blobs) > 20
     for j in range(len(blobs)):
-        cov = blobs.covariance(j)
+        cov = _opencv_covariance(blobs, j)
         # As the detector calls it (a Python int label: one compiled signature).
         xx, xy, yy = card_kernels.blob_covariance(blobs.labels, blobs.box[j],
                                                   int(blobs.label[j]), blobs.scale)

@@ -1621,6 +1621,42 @@ def darkest_in(image, x0, y0, x1, y1):
 
 
 @_kernel
+def decimate_darkest(image):
+    """
+    Return a BGR image (H, W, 3) halved, (H/2, W/2, 3), and its darkest channel (H/2, W/2).
+
+    The halved image is OpenCV's area resize by two to the bit (each 2 x 2
+    block's mean per channel, rounded half up; a last odd row or column
+    left out) and the darkest channel its per-pixel minimum over B, G, R,
+    the segmentation's ``_min_channel``. One pass over the frame: the
+    resize and the erosion that took the minimum, with its copy, read the
+    frame and the halved image apart, each from memory that the frame's
+    other work (its rendering, its message) had left cold. Rows are read
+    flat, so that each pixel's three channels compile to plain loads.
+    """
+    h, w = image.shape[0], image.shape[1]
+    h2, w2 = h // 2, w // 2
+    small = np.empty((h2, w2, 3), dtype=np.uint8)
+    darkest = np.empty((h2, w2), dtype=np.uint8)
+    flat = image.reshape(h, w * 3)
+    out = small.reshape(h2, w2 * 3)
+    for y in range(h2):
+        r0 = flat[2 * y]
+        r1 = flat[2 * y + 1]
+        row = out[y]
+        for x in range(w2):
+            i = 6 * x
+            b = (np.int32(r0[i]) + r0[i + 3] + r1[i] + r1[i + 3] + 2) >> 2
+            g = (np.int32(r0[i + 1]) + r0[i + 4] + r1[i + 1] + r1[i + 4] + 2) >> 2
+            r = (np.int32(r0[i + 2]) + r0[i + 5] + r1[i + 2] + r1[i + 5] + 2) >> 2
+            row[3 * x] = b
+            row[3 * x + 1] = g
+            row[3 * x + 2] = r
+            darkest[y, x] = min(b, min(g, r))
+    return small, darkest
+
+
+@_kernel
 def _root(parent, i):
     """Root of run ``i`` in the union-find forest ``parent``, compressing the path."""
     r = i
@@ -1927,6 +1963,7 @@ def warm_up() -> float:
     image.flags.writeable = False
     combed_tiles(image, 16)
     darkest_in(image, 0, 0, 4, 4)
+    decimate_darkest(image)
     label_components(np.zeros((3, 3), dtype=np.uint8))
     blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)

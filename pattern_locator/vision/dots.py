@@ -239,14 +239,19 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
     grey = image.ndim == 2
     h, w = image.shape[:2]
     s = params.decimate if min(h, w) >= 48 * params.decimate else 1
-    if s == 2:
+    if s == 2 and not grey:
+        # Halved and its darkest channel in one pass over the frame (OpenCV's
+        # area resize and the minimum over B, G, R, to the bit).
+        small, coarse = card_kernels.decimate_darkest(_read_only(image))
+    elif s == 2:
         h2, w2 = h // 2, w // 2
         view = image[:2 * h2, :2 * w2]
-        small = cv2.resize(view if view.flags['C_CONTIGUOUS'] else np.ascontiguousarray(view),
-                           (w2, h2), interpolation=cv2.INTER_AREA)
+        small = coarse = cv2.resize(view if view.flags['C_CONTIGUOUS']
+                                    else np.ascontiguousarray(view), (w2, h2),
+                                    interpolation=cv2.INTER_AREA)
     else:
         small = image
-    coarse = small if grey else _min_channel(small)
+        coarse = small if grey else _min_channel(small)
     # Local white and noise on a grid four times coarser.
     ch, cw = coarse.shape
     gh, gw = max(1, ch // 4), max(1, cw // 4)
@@ -341,10 +346,15 @@ def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
     # is strong (6 levels a pixel on average) and three times its two-row
     # curvature. One argument type for the kernel (each compiles again, for
     # seconds): contiguous, 3-D and read-only (a ROS image's buffer is).
+    return card_kernels.combed_tiles(_read_only(image), int(tile_rows)) >= 2
+
+
+def _read_only(image: np.ndarray) -> np.ndarray:
+    """Return ``image`` as the kernels take a frame: contiguous (H, W, C) and read-only."""
     image = np.ascontiguousarray(image)
     view = (image if image.ndim == 3 else image[:, :, None]).view()
     view.flags.writeable = False
-    return card_kernels.combed_tiles(view, int(tile_rows)) >= 2
+    return view
 
 
 def one_field(image: np.ndarray, field: str) -> np.ndarray:

@@ -278,7 +278,7 @@ def _group_into(u, v, area, box, label, labels, scale, ci, ring_rho, min_fill, f
     if ci < 0 or ci >= n or n_rings < 1 or v.shape[0] < n or area.shape[0] < n \
             or box.shape[0] < n or box.shape[1] < 4 or label.shape[0] < n:
         return 0
-    cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
+    cxx, cxy, cyy = blob_covariance(labels, box[ci], np.int64(label[ci]), scale)
     small, big, ex, ey = _eig2(cxx, cxy, cyy)
     if not small > 0.0:
         return 0
@@ -653,7 +653,7 @@ def ring_evidence(u, v, area, box, label, labels, scale, idx, reach, min_neighbo
                                          math.sqrt(ac / math.pi))
             ex, ey = 1.0, 0.0
         else:
-            cxx, cxy, cyy = blob_covariance(labels, box[ci], label[ci], scale)
+            cxx, cxy, cyy = blob_covariance(labels, box[ci], np.int64(label[ci]), scale)
             small, big, ex, ey = _eig2(cxx, cxy, cyy)
             if not small > 0.0:
                 continue
@@ -1912,7 +1912,10 @@ def faint_rings(small, us, vs, reach, max_area, white, noise, radius, scale, fai
                         darkest = min(darkest, small[y, x, c])
                     mask[y - y0, x - x0] = 255 if darkest < limit else 0
             labels, stats, centroids = label_components(mask)
-            own = labels[min(int(v / scale), y1 - 1) - y0, min(int(u / scale), x1 - 1) - x0]
+            # int64, not the labels' int32: the signature warm_up compiles for
+            # faint_components, not a second one for this call.
+            own = np.int64(labels[min(int(v / scale), y1 - 1) - y0,
+                                  min(int(u / scale), x1 - 1) - x0])
             spots, own_area[k] = faint_components(
                 stats, centroids, own, max_area[k], scale, (x0 + 0.5) * scale - 0.5 - u,
                 (y0 + 0.5) * scale - 0.5 - v)

@@ -693,7 +693,11 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
         white = _bilinear(white_grid, pred[:, 0].copy(), pred[:, 1].copy(), grid_step)
         for i in range(n):
             white_level[i] = _F32(white[i])
-    g1 = _first_group(image, 1, index1, pred, U, semi, Linv, spots, plane_xy, owner, half,
+    # The image's own scale as a variable, not the literal 1: numba compiles
+    # a pass again for a literal argument, and the two groups' calls would
+    # run two copies of each pass (compile time, and code to load per frame).
+    full = np.int64(1)
+    g1 = _first_group(image, full, index1, pred, U, semi, Linv, spots, plane_xy, owner, half,
                       resolution, major, minor, white_level, paper_sigma, paper_quiet,
                       core_margin, min_darkness, points, valid, peak, area, inside)
     g2 = _first_group(small, small_scale, index2, pred, U, semi, Linv, spots, plane_xy, owner,
@@ -719,7 +723,7 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
             spread[index2[k]] = g2[14][k]
         blurred = blur(spread, U, major, minor, valid)
         c1, connected1 = last_pass(g1[7], g1[11], g1[8], g1[10], g1[13], g1[12], g1[3], g1[2],
-                                   g1[0], 1, index1, major, minor, blurred, g1[15], g1[4],
+                                   g1[0], full, index1, major, minor, blurred, g1[15], g1[4],
                                    spots, plane_xy, owner, half, resolution, points, pred,
                                    valid, readable)
         c2, connected2 = last_pass(g2[7], g2[11], g2[8], g2[10], g2[13], g2[12], g2[3], g2[2],
@@ -729,8 +733,8 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
         if colour:
             channel_at = np.full((n, 3, 2), np.nan)
             strength = np.zeros((n, 3))
-            dark1 = colours(g1[5], table, g1[9], g1[10], connected1, g1[2], c1, g1[3], g1[0], 1,
-                            index1, major, minor, max_shift, valid, readable, colour_out,
+            dark1 = colours(g1[5], table, g1[9], g1[10], connected1, g1[2], c1, g1[3], g1[0],
+                            full, index1, major, minor, max_shift, valid, readable, colour_out,
                             channel_at, strength)
             dark2 = colours(g2[5], table, g2[9], g2[10], connected2, g2[2], c2, g2[3], g2[0],
                             small_scale, index2, major, minor, max_shift, valid, readable,

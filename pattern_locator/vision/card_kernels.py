@@ -1621,18 +1621,21 @@ def darkest_in(image, x0, y0, x1, y1):
 
 
 @_kernel
-def decimate_darkest(image):
+def halve(image, comb_tile_rows):
     """
-    Return a BGR image (H, W, 3) halved, (H/2, W/2, 3), and its darkest channel (H/2, W/2).
+    Halve a BGR frame (H, W, 3) and, on the way, count its combed tiles: (halved, darkest, tiles).
 
-    The halved image is OpenCV's area resize by two to the bit (each 2 x 2
+    The halved frame is OpenCV's area resize by two to the bit (each 2 x 2
     block's mean per channel, rounded half up; a last odd row or column
-    left out) and the darkest channel its per-pixel minimum over B, G, R,
-    the segmentation's ``_min_channel``. One pass over the frame: the
-    resize and the erosion that took the minimum, with its copy, read the
-    frame and the halved image apart, each from memory that the frame's
-    other work (its rendering, its message) had left cold. Rows are read
-    flat, so that each pixel's three channels compile to plain loads.
+    left out) and ``darkest`` its per-pixel minimum over B, G, R, the
+    segmentation's ``_min_channel``. With ``comb_tile_rows`` > 0, the
+    interlace comb test of :func:`combed_tiles` (same tiles, same sums,
+    counting stops at two) rides on the same pass; with 0 it is not made
+    (``tiles`` 0). One pass over the frame: the comb test, the resize and
+    the erosion that took the minimum, with its copy, each read the frame or
+    the halved frame apart from memory that the frame's other work (its
+    rendering, its message) had left cold. Rows are read flat, so that each
+    pixel's three channels compile to plain loads.
     """
     h, w = image.shape[0], image.shape[1]
     h2, w2 = h // 2, w // 2
@@ -1640,20 +1643,55 @@ def decimate_darkest(image):
     darkest = np.empty((h2, w2), dtype=np.uint8)
     flat = image.reshape(h, w * 3)
     out = small.reshape(h2, w2 * 3)
-    for y in range(h2):
-        r0 = flat[2 * y]
-        r1 = flat[2 * y + 1]
-        row = out[y]
-        for x in range(w2):
-            i = 6 * x
-            b = (np.int32(r0[i]) + r0[i + 3] + r1[i] + r1[i + 3] + 2) >> 2
-            g = (np.int32(r0[i + 1]) + r0[i + 4] + r1[i + 1] + r1[i + 4] + 2) >> 2
-            r = (np.int32(r0[i + 2]) + r0[i + 5] + r1[i + 2] + r1[i + 5] + 2) >> 2
-            row[3 * x] = b
-            row[3 * x + 1] = g
-            row[3 * x + 2] = r
-            darkest[y, x] = min(b, min(g, r))
-    return small, darkest
+    # The comb test's geometry, as combed_tiles': tiles of comb_tile_rows
+    # rows and four sampled columns (every sixteenth, green), rows 2 to
+    # 2 + rows, each row's curvature over one row and over two.
+    cols = (w + 15) // 16 // 4 * 4
+    last = (h - 4) // 2 * 2
+    comb = comb_tile_rows >= 1 and last >= 2 * comb_tile_rows
+    rows = last // comb_tile_rows * comb_tile_rows if comb else 0
+    tiles = cols // 4
+    pixels = comb_tile_rows * 4
+    t1 = np.zeros(max(tiles, 1), dtype=np.int64)
+    t2 = np.zeros(max(tiles, 1), dtype=np.int64)
+    ring = np.empty((5, max(cols, 1)), dtype=np.int64)
+    count = 0
+    for q in range(h):
+        row_q = flat[q]
+        if comb and count < 2 and q < rows + 4:
+            # Row q's samples; then row r = q - 2, whose rows r - 2 .. r + 2
+            # are all in the ring now.
+            for j in range(cols):
+                ring[q % 5, j] = row_q[48 * j + 1]
+            r = q - 2
+            if r >= 2:
+                above2, above1, mid_row, below1, below2 = (r - 2) % 5, (r - 1) % 5, r % 5, \
+                    (r + 1) % 5, q % 5
+                for j in range(cols):
+                    mid = 2 * ring[mid_row, j]
+                    t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
+                    t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
+                if (r - 2) % comb_tile_rows == comb_tile_rows - 1:
+                    for t in range(tiles):
+                        if count < 2 and t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
+                            count += 1
+                        t1[t] = 0
+                        t2[t] = 0
+        if q % 2 == 1 and q // 2 < h2:
+            y = q // 2
+            r0 = flat[q - 1]
+            r1 = row_q
+            o = out[y]
+            for x in range(w2):
+                i = 6 * x
+                blue = (np.int32(r0[i]) + r0[i + 3] + r1[i] + r1[i + 3] + 2) >> 2
+                green = (np.int32(r0[i + 1]) + r0[i + 4] + r1[i + 1] + r1[i + 4] + 2) >> 2
+                red = (np.int32(r0[i + 2]) + r0[i + 5] + r1[i + 2] + r1[i + 5] + 2) >> 2
+                o[3 * x] = blue
+                o[3 * x + 1] = green
+                o[3 * x + 2] = red
+                darkest[y, x] = min(blue, min(green, red))
+    return small, darkest, count
 
 
 @_kernel
@@ -1966,7 +2004,7 @@ def warm_up() -> float:
     image.flags.writeable = False
     combed_tiles(image, 16)
     darkest_in(image, 0, 0, 4, 4)
-    decimate_darkest(image)
+    halve(image, 16)
     label_components(np.zeros((3, 3), dtype=np.uint8))
     blob_covariance(labels, box[0], 1, 2)
     dot_components(np.zeros((2, 5), dtype=i4), np.zeros((2, 2)), 2, 0, 0, 10.0, 4, 4)

@@ -36,6 +36,8 @@ _FAINT_RATIO = 0.12
 # Windows up to this many pixels take their darkest channel in one compiled
 # pass (about 4x faster at 20 x 20, as fast at 100 x 100, slower beyond).
 _COMPILED_DARKEST_PIXELS = 10000
+# Rows of a tile of the interlace comb test (:func:`combed`).
+_COMB_TILE_ROWS = 16
 
 
 @dataclass(frozen=True)
@@ -232,17 +234,25 @@ def check_image(image: np.ndarray) -> np.ndarray:
 def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
     """Segment a checked image (see :func:`check_image`) into dots."""
     field = params.field
-    if field == 'auto':
-        field = 'even' if combed(image) else 'frame'
-    if field in ('even', 'odd'):
-        image = one_field(image, field)
     grey = image.ndim == 2
     h, w = image.shape[:2]
     s = params.decimate if min(h, w) >= 48 * params.decimate else 1
+    halved = None
     if s == 2 and not grey:
-        # Halved and its darkest channel in one pass over the frame (OpenCV's
-        # area resize and the minimum over B, G, R, to the bit).
-        small, coarse = card_kernels.decimate_darkest(_read_only(image))
+        # Halved, its darkest channel and (field 'auto') the comb test in one
+        # pass over the frame (card_kernels.halve: OpenCV's area resize, the
+        # minimum over B, G, R and combed()'s tiles, to the bit).
+        halved = card_kernels.halve(_read_only(image), _COMB_TILE_ROWS if field == 'auto' else 0)
+        if field == 'auto':
+            field = 'even' if halved[2] >= 2 else 'frame'
+    elif field == 'auto':
+        field = 'even' if combed(image) else 'frame'
+    if field in ('even', 'odd'):
+        image = one_field(image, field)
+        if halved is not None:
+            halved = card_kernels.halve(_read_only(image), 0)
+    if halved is not None:
+        small, coarse = halved[0], halved[1]
     elif s == 2:
         h2, w2 = h // 2, w // 2
         view = image[:2 * h2, :2 * w2]
@@ -329,7 +339,7 @@ def _min_channel(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(rows[:, 1::3])
 
 
-def combed(image: np.ndarray, tile_rows: int = 16) -> bool:
+def combed(image: np.ndarray, tile_rows: int = _COMB_TILE_ROWS) -> bool:
     """
     Tell whether the image is an interlaced frame whose two fields disagree.
 

@@ -214,7 +214,7 @@ def test_one_compiled_signature_per_kernel_after_detections():
                card_kernels.threshold, card_kernels.faint_components,
                card_kernels.faint_rings,
                card_kernels.label_components, card_kernels.blob_covariance,
-               card_kernels.darkest_in, card_kernels.decimate_darkest,
+               card_kernels.darkest_in, card_kernels.halve,
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,
                fit_kernels.fit_homography_inliers, fit_kernels.planar_poses,
                fit_kernels.refine_exact, spot_kernels.measure,
@@ -261,24 +261,33 @@ def test_darkest_channel_of_a_window_is_numpys_minimum_clipped_to_the_image():
         assert np.array_equal(got, image[cy0:cy1, cx0:cx1].min(axis=2))
 
 
-def test_halved_frame_and_its_darkest_channel_are_opencvs_to_the_bit():
-    # The segmentation halves the frame with OpenCV's area resize and takes
-    # the minimum over B, G, R; the kernel does both in one pass. Odd sizes
-    # drop the last row or column, as the crop before the resize did.
+def test_halved_frame_its_darkest_channel_and_comb_count_are_opencvs_and_combed_tiles():
+    # The segmentation's one pass over the frame: OpenCV's area resize by
+    # two, the minimum over B, G, R, and the comb test's tile count (as
+    # combed_tiles, which stops counting at two). Odd sizes drop the last
+    # row or column, as the crop before the resize did.
     rng = np.random.default_rng(21)
-    for h, w in [(16, 16), (17, 23), (48, 64), (97, 130), (240, 321)]:
-        for image in (rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
-                      np.full((h, w, 3), 255, dtype=np.uint8),
-                      (rng.integers(0, 2, (h, w, 3)) * 255).astype(np.uint8),
+    combs = 0
+    for h, w in [(16, 16), (17, 23), (48, 64), (97, 130), (240, 321), (300, 70)]:
+        noise = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        comb = noise // 4
+        comb[::2] += 150                                 # the two fields apart
+        bars = np.full((h, w, 3), 200, dtype=np.uint8)
+        bars[rng.integers(0, h, 12)] = 10
+        for image in (noise, comb, bars, np.full((h, w, 3), 255, dtype=np.uint8),
                       (rng.integers(0, 4, (h, w, 3)) + 126).astype(np.uint8)):
             view = image.view()
             view.flags.writeable = False
-            small, darkest = card_kernels.decimate_darkest(view)
             h2, w2 = h // 2, w // 2
             expected = cv2.resize(np.ascontiguousarray(image[:2 * h2, :2 * w2]), (w2, h2),
                                   interpolation=cv2.INTER_AREA)
-            assert np.array_equal(small, expected)
-            assert np.array_equal(darkest, expected.min(axis=2))
+            for tile_rows in (16, 3, 0):
+                small, darkest, tiles = card_kernels.halve(view, tile_rows)
+                assert np.array_equal(small, expected)
+                assert np.array_equal(darkest, expected.min(axis=2))
+                assert tiles == (card_kernels.combed_tiles(view, tile_rows) if tile_rows else 0)
+                combs += tiles >= 2
+    assert combs >= 6       # combed frames counted, not only plain ones compared
 
 
 def test_every_kernel_is_ready_at_import():

@@ -276,12 +276,15 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
     noise = cv2.erode(noise, np.ones((5, 5), np.uint8)) / _HIGHPASS_PER_SIGMA
     # Coarse-image noise to full-resolution noise (decimation averages s*s pixels).
     noise *= s
-    threshold = _threshold(white, noise / s, params)
-    threshold = cv2.resize(threshold, (cw, ch), interpolation=cv2.INTER_LINEAR)
+    grid_threshold = _threshold(white, noise / s, params)
+    threshold = cv2.resize(grid_threshold, (cw, ch), interpolation=cv2.INTER_LINEAR)
     mask = cv2.compare(coarse, threshold, cv2.CMP_LT)
     blobs = _components(mask, s, (0, 0), params.max_dot_area_fraction * h * w / (s * s))
+    # The grid threshold kept: the full-resolution windows resize it
+    # (DotImage._grid_threshold makes the same from white and noise).
     return DotImage(image, grey, blobs, white, noise, step,
-                    field if field in ('even', 'odd') else None, params, small, s)
+                    field if field in ('even', 'odd') else None, params, small, s,
+                    {'grid_threshold': grid_threshold})
 
 
 def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> np.ndarray:
@@ -292,8 +295,10 @@ def _threshold(white: np.ndarray, noise: np.ndarray, params: DetectorParams) -> 
     # noise_factor noise (at most half the white), at least 2 grey levels;
     # no dots where the white is below min_white (card_kernels.threshold).
     # float32, as the grids are (any shape: one kernel signature, 2-D).
-    white, noise = np.broadcast_arrays(np.asarray(white, dtype=np.float32),
-                                       np.asarray(noise, dtype=np.float32))
+    white = np.asarray(white, dtype=np.float32)
+    noise = np.asarray(noise, dtype=np.float32)
+    if white.shape != noise.shape:
+        white, noise = np.broadcast_arrays(white, noise)
     shape = white.shape
     return card_kernels.threshold(
         np.ascontiguousarray(white.reshape(1, -1) if white.ndim != 2 else white),

@@ -24,7 +24,7 @@ $(STAMP): requirements.txt requirements-dev.txt setup.py setup.cfg package.xml
 	  if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))'; then \
 	    rm -rf $(VENV) && $$py312 -m venv $(VENV); fi
 	$(PY) -m pip install --quiet --disable-pip-version-check --upgrade pip
-	@# The detector's compiled passes: built once here (about 90 s of one core)
+	@# The detector's compiled passes: built once here (about 70 s of one core)
 	@# into numba's cache beside the modules, not in every test process at once.
 	@# What the detector imports goes in first, so that they compile while pip
 	@# installs the rest on the other core.

@@ -2017,6 +2017,6 @@ def warm_up() -> float:
 # Every kernel compiled, or loaded from the cache, when the module is imported:
 # a node's first frame must not wait for it (a closed loop that starts
 # tracking 0.4 s late misses its settling time). From the cache this takes
-# 0.4 s; the first import after installing compiles them all (about 20 s of
+# 0.4 s; the first import after installing compiles them all (about 25 s of
 # one core, once).
 warm_up()

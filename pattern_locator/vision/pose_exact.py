@@ -16,10 +16,10 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
 * the covariance is ``s^2 (J^T J)^-1`` with J the Jacobian of the
   reprojection with respect to the camera pose in the pattern frame, plus
   the spread of the two solutions when the other one is not ruled out
-  (:func:`_with_other_solution`).
+  (:func:`_other_solution_spread`).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field as dataclass_field
 import math
 from typing import Dict, Optional, Tuple
 
@@ -89,6 +89,9 @@ class PoseEstimate:
     alternative: Optional[Pose]     # the other planar solution
     n_points: int
     chosen_by: str                  # 'reprojection' or 'prior'
+    # The part of ``covariance`` that spans the other solution (zeros when
+    # it is ruled out): a fix's covariance adds it to its own image term.
+    other_spread: np.ndarray = dataclass_field(default_factory=lambda: np.zeros((6, 6)))
 
     @property
     def camera_in_pattern(self) -> np.ndarray:
@@ -157,25 +160,25 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     pose = Pose(R, t)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
-    covariance = pose_covariance(pose, obj, K, sigma)
+    spread = np.zeros((6, 6))
     if other is not None and other_weight > 0.0:
-        covariance = _with_other_solution(covariance, pose, Pose(other[1], other[2]),
-                                          other_weight / (1.0 + other_weight))
+        spread = _other_solution_spread(pose, Pose(other[1], other[2]),
+                                        other_weight / (1.0 + other_weight))
     return PoseEstimate(
         T_camera_pattern=pose,
-        covariance=covariance,
+        covariance=pose_covariance(pose, obj, K, sigma) + spread,
         reprojection_rms_px=math.sqrt(ss / n),
         ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
         alternative=Pose(other[1], other[2]) if other is not None else None,
         n_points=n,
         chosen_by=chosen_by,
+        other_spread=spread,
     )
 
 
-def _with_other_solution(covariance: np.ndarray, chosen: Pose, other: Pose,
-                         p_other: float) -> np.ndarray:
+def _other_solution_spread(chosen: Pose, other: Pose, p_other: float) -> np.ndarray:
     """
-    Return the covariance of the two planar solutions as one, the other's probability ``p_other``.
+    Return the covariance the other planar solution adds, its probability ``p_other``.
 
     A card seen nearly face on, far away, can fit its dots almost as well
     turned the other way about an axis in its plane (the planar flip), and
@@ -188,7 +191,7 @@ def _with_other_solution(covariance: np.ndarray, chosen: Pose, other: Pose,
     """
     d = np.concatenate([other.inverse().t - chosen.inverse().t,
                         rotation_vector(other.R.T @ chosen.R)])
-    return covariance + p_other * (1.0 - p_other) * np.outer(d, d)
+    return p_other * (1.0 - p_other) * np.outer(d, d)
 
 
 def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,

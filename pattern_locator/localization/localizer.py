@@ -322,8 +322,7 @@ class RobotLocalizer:
                     terms = fix_covariance(self.uncertainty, camera, self._model_points, seen,
                                            located.reprojection_rms_px, T_camera_card,
                                            T_frame_card, T_frame_base, mapped, self.head,
-                                           motion, twist,
-                                           getattr(located, 'other_spread', None))
+                                           motion, twist)
                     covariance = terms.total
                 except (ValueError, np.linalg.LinAlgError):
                     covariance = None      # the covariance gate says so

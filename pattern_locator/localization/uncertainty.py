@@ -35,11 +35,6 @@ about the frame's axes, as ``RobotFix.covariance``):
 ``floor``
     What the other terms leave unexplained (``floor_position_m``,
     ``floor_rotation_deg``).
-``flip``
-    The other planar solution while the image and the prior have not ruled
-    it out (a card nearly face on and far, turned about its vertical axis):
-    the estimator's two-solution spread (:class:`.PoseEstimate`
-    ``other_spread``), zero otherwise.
 
 The default parameters are the values measured by ``pattern-locator bench
 --drive-core`` (``docs/robot_localization.md`` has the measurements).
@@ -59,8 +54,7 @@ from ..vision.camera import CameraModel
 from ..vision.geometry import Pose, rodrigues, skew
 from ..vision.pose_exact import DEFAULT_MIN_SIGMA_PX, pose_covariance
 
-TERMS = ('image', 'head_timing', 'head_interpolation', 'head_resolution', 'map', 'floor',
-         'flip')
+TERMS = ('image', 'head_timing', 'head_interpolation', 'head_resolution', 'map', 'floor')
 # The EVI-D31's joint resolution (visca.md): pan 8.8 units per degree, tilt 12.
 EVI_D31_PAN_STEP_RAD = math.radians(1.0 / 8.8)
 EVI_D31_TILT_STEP_RAD = math.radians(1.0 / 12.0)
@@ -197,8 +191,7 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
                    model_points: np.ndarray, seen: np.ndarray, reprojection_rms_px: float,
                    T_camera_card: Pose, T_frame_card: Pose, T_frame_base: Pose, card,
                    head: HeadGeometry, motion: HeadMotion,
-                   twist: Optional[BaseTwist] = None,
-                   other_spread: Optional[np.ndarray] = None) -> FixCovariance:
+                   twist: Optional[BaseTwist] = None) -> FixCovariance:
     """
     Return a fix's covariance, term by term (module docstring), in the frame of ``T_frame_card``.
 
@@ -207,9 +200,7 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
     residual; ``T_camera_card``: the estimated pose; ``T_frame_card`` and
     ``T_frame_base``: the card and the base in the output frame; ``card``:
     the map's card (for ``std_dev``); ``motion``: the head's angles and
-    rates at the stamp; ``twist``: the base's (None: standing);
-    ``other_spread``: the estimator's spread towards the other planar
-    solution (camera pose parameters, None: none).
+    rates at the stamp; ``twist``: the base's (None: standing).
     """
     p = parameters
     seen = np.asarray(seen, dtype=bool)
@@ -249,8 +240,6 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
                              T_frame_card, T_frame_base)
     terms['floor'] = np.diag([p.floor_position_m ** 2] * 3
                              + [math.radians(p.floor_rotation_deg) ** 2] * 3)
-    terms['flip'] = np.zeros((6, 6)) if other_spread is None else covariance_to_base(
-        np.asarray(other_spread, dtype=float), T_frame_card, T_camera_card, head, pan, tilt)
     total = np.sum(list(terms.values()), axis=0)
     return FixCovariance(0.5 * (total + total.T), terms, sigma_px, blur, residual_sigma)
 

@@ -35,9 +35,6 @@ class LocatedCard:
     distance_m: Optional[float]
     estimator: str
     problem: Optional[str] = None          # why there is no pose
-    # The part of `covariance` that spans the other planar solution (exact
-    # estimator, while it is not ruled out; None or zeros otherwise).
-    other_spread: Optional[np.ndarray] = None
 
     @property
     def camera_in_pattern(self) -> Optional[np.ndarray]:
@@ -99,8 +96,7 @@ class CardLocator:
             return _no_pose(card, 'exact', f'tilt {phi:.1f} deg below the minimum '
                                            f'{self.min_tilt_deg:.1f} deg')
         return LocatedCard(card, est.T_camera_pattern, est.covariance, est.reprojection_rms_px,
-                           est.ambiguity, psi, phi, theta, distance, 'exact',
-                           other_spread=est.other_spread)
+                           est.ambiguity, psi, phi, theta, distance, 'exact')
 
     def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
         from .pose_paper import estimate_paper

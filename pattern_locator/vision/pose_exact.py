@@ -14,12 +14,10 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
   nearly equal (``ambiguity`` close to 1, the planar "flip"), where what is
   known about the camera (a :class:`PosePrior`) decides;
 * the covariance is ``s^2 (J^T J)^-1`` with J the Jacobian of the
-  reprojection with respect to the camera pose in the pattern frame, plus
-  the spread of the two solutions when the other one is not ruled out
-  (:func:`_other_solution_spread`).
+  reprojection with respect to the camera pose in the pattern frame.
 """
 
-from dataclasses import dataclass, field as dataclass_field
+from dataclasses import dataclass
 import math
 from typing import Dict, Optional, Tuple
 
@@ -30,7 +28,7 @@ from .camera import CameraModel
 from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
                           point_residuals, pose_covariance_matrix, project_points,
                           refine_exact, refine_pose)
-from .geometry import Pose, rotation_vector
+from .geometry import Pose
 from .per_config import made_once
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
@@ -89,9 +87,6 @@ class PoseEstimate:
     alternative: Optional[Pose]     # the other planar solution
     n_points: int
     chosen_by: str                  # 'reprojection' or 'prior'
-    # The part of ``covariance`` that spans the other solution (zeros when
-    # it is ruled out): a fix's covariance adds it to its own image term.
-    other_spread: np.ndarray = dataclass_field(default_factory=lambda: np.zeros((6, 6)))
 
     @property
     def camera_in_pattern(self) -> np.ndarray:
@@ -130,17 +125,12 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         rms = [math.sqrt(c[0] / n) for c in candidates]
         ambiguity = rms[1] / max(rms[0], 1e-9)
     best, chosen_by = 0, 'reprojection'
-    # How likely the other solution is, against the chosen one, from the
-    # residuals and what is known (0 when the image alone rules it out).
-    other_weight = 0.0
-    if len(candidates) > 1 and ambiguity < ambiguity_threshold:
+    if prior is not None and len(candidates) > 1 and ambiguity < ambiguity_threshold:
         sigma2 = max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2
-        costs = [c[0] / sigma2 + (prior.penalty(Pose(c[1], c[2])) if prior else 0.0)
-                 for c in candidates]
+        costs = [c[0] / sigma2 + prior.penalty(Pose(c[1], c[2])) for c in candidates]
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
-        other_weight = math.exp(-0.5 * min(costs[1 - best] - costs[best], 1400.0))
     # (Each candidate carries its projection, made for its residual.) The
     # centres' bias correction depends only weakly on the pose: computed
     # from IPPE's pose it leaves a bias far below the noise after the
@@ -160,38 +150,15 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     pose = Pose(R, t)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
-    spread = np.zeros((6, 6))
-    if other is not None and other_weight > 0.0:
-        spread = _other_solution_spread(pose, Pose(other[1], other[2]),
-                                        other_weight / (1.0 + other_weight))
     return PoseEstimate(
         T_camera_pattern=pose,
-        covariance=pose_covariance(pose, obj, K, sigma) + spread,
+        covariance=pose_covariance(pose, obj, K, sigma),
         reprojection_rms_px=math.sqrt(ss / n),
         ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
         alternative=Pose(other[1], other[2]) if other is not None else None,
         n_points=n,
         chosen_by=chosen_by,
-        other_spread=spread,
     )
-
-
-def _other_solution_spread(chosen: Pose, other: Pose, p_other: float) -> np.ndarray:
-    """
-    Return the covariance the other planar solution adds, its probability ``p_other``.
-
-    A card seen nearly face on, far away, can fit its dots almost as well
-    turned the other way about an axis in its plane (the planar flip), and
-    "up" tells the two apart only when that axis is horizontal. The chosen
-    pose's own covariance does not know the other solution: at 5.7 m, one
-    such pose was 1.24 m off with a largest position sigma of 7 cm. The two
-    solutions' spread is added to it (a two-point mixture's covariance,
-    ``p (1 - p) d d^T`` with ``d`` the difference of the two poses in the
-    covariance's parameters), so that a fix a metre off says it may be.
-    """
-    d = np.concatenate([other.inverse().t - chosen.inverse().t,
-                        rotation_vector(other.R.T @ chosen.R)])
-    return p_other * (1.0 - p_other) * np.outer(d, d)
 
 
 def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,

@@ -9,8 +9,7 @@ from pattern_locator.errors import ConfigError
 from pattern_locator.localization.building import building_from_dict
 from pattern_locator.localization.gates import GateParameters
 from pattern_locator.localization.head import (angle_jacobian, base_pose_from_camera,
-                                               covariance_to_base, HeadGeometry, HeadMotion,
-                                               JointStateBuffer)
+                                               HeadGeometry, HeadMotion, JointStateBuffer)
 from pattern_locator.localization.localizer import RobotLocalizer
 from pattern_locator.localization.odom import BaseTwist
 from pattern_locator.localization.uncertainty import (card_std_dev, chi2_95, fix_covariance,
@@ -85,31 +84,6 @@ def test_the_head_timing_term_is_the_rate_times_the_stamp_error():
     held = covariance(params, card, HeadMotion(pan, tilt, 0.0, 0.2, hold_s=0.05), T_camera_card)
     assert np.allclose(held.terms['head_interpolation'],
                        (0.2 * 0.05) ** 2 * np.outer(J[:, 1], J[:, 1]))
-
-
-def test_the_flip_term_is_the_estimators_spread_towards_the_other_solution():
-    # The estimator's spread (camera pose parameters, as its Fisher
-    # covariance) reaches the fix as the image term does; none, no term.
-    card = room_map().card((1, 1, 1))
-    _, pan, tilt, T_camera_card = seen_from(card, 4.0, 1.0)
-    params = UncertaintyParameters()
-    motion = HeadMotion(pan, tilt)
-    T_room_base = base_pose_from_camera(card.T_room_card, T_camera_card, HEAD, pan, tilt)
-    d = np.array([0.8, 0.0, 0.1, 0.0, 0.2, 0.0])
-    spread = 0.2 * np.outer(d, d)
-
-    def fix(other_spread):
-        return fix_covariance(params, TABLE.camera_at(600), MODEL_POINTS, ALL_DOTS, 0.02,
-                              T_camera_card, card.T_room_card, T_room_base, card, HEAD, motion,
-                              None, other_spread)
-
-    without, with_spread = fix(None), fix(spread)
-    assert not np.any(without.terms['flip'])
-    expected = covariance_to_base(spread, card.T_room_card, T_camera_card, HEAD, pan, tilt)
-    assert np.allclose(with_spread.terms['flip'], expected, rtol=1e-12, atol=1e-15)
-    assert np.allclose(with_spread.total - without.total, expected, atol=1e-12)
-    # A metre-sized spread dominates a fix from 4 m.
-    assert with_spread.position_sigmas()['flip'] > 0.3
 
 
 def test_the_map_term_from_the_cards_std_dev():

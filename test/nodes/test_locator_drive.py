@@ -339,7 +339,7 @@ def test_the_covariance_terms_show_in_the_diagnostics_and_their_sizes_apply(driv
     shares = {k[len('uncertainty_share_'):]: float(v) for k, v in values.items()
               if k.startswith('uncertainty_share_')}
     assert set(shares) == {'image', 'head_timing', 'head_interpolation', 'head_resolution',
-                           'map', 'floor', 'flip'}
+                           'map', 'floor'}
     # Still head, exact map, no floor: the image limits these fixes.
     assert shares['image'] > 0.5 and shares['floor'] == 0.0 and shares['map'] == 0.0
     assert float(values['position_sigma_mm_median']) > 0.0

@@ -1581,22 +1581,36 @@ def combed_tiles(image, tile_rows):
         for j in range(cols):
             ring[q, j] = image[q, 16 * j, ch]
     for r0 in range(2, 2 + rows, tile_rows):
-        t1[:] = 0
-        t2[:] = 0
         for r in range(r0, r0 + tile_rows):
             below2 = (r + 2) % 5
             for j in range(cols):
                 ring[below2, j] = image[r + 2, 16 * j, ch]
-            above2, above1, mid_row, below1 = (r - 2) % 5, (r - 1) % 5, r % 5, (r + 1) % 5
-            for j in range(cols):
-                mid = 2 * ring[mid_row, j]
-                t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
-                t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
-        for t in range(tiles):
-            if t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
-                count += 1
-                if count >= 2:
-                    return count
+            _comb_row(ring, r, cols, t1, t2)
+        count = _combed_count(t1, t2, tiles, pixels, count)
+        if count >= 2:
+            return count
+    return count
+
+
+@_kernel
+def _comb_row(ring, r, cols, t1, t2):
+    """Add row ``r``'s curvatures over one row and over two (ring of five rows) to its tiles."""
+    above2, above1, mid_row, below1, below2 = (r - 2) % 5, (r - 1) % 5, r % 5, (r + 1) % 5, \
+        (r + 2) % 5
+    for j in range(cols):
+        mid = 2 * ring[mid_row, j]
+        t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
+        t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
+
+
+@_kernel
+def _combed_count(t1, t2, tiles, pixels, count):
+    """Add the tiles whose rows disagree as a comb's to ``count`` (up to two); zero the sums."""
+    for t in range(tiles):
+        if count < 2 and t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
+            count += 1
+        t1[t] = 0
+        t2[t] = 0
     return count
 
 
@@ -1665,18 +1679,9 @@ def halve(image, comb_tile_rows):
                 ring[q % 5, j] = row_q[48 * j + 1]
             r = q - 2
             if r >= 2:
-                above2, above1, mid_row, below1, below2 = (r - 2) % 5, (r - 1) % 5, r % 5, \
-                    (r + 1) % 5, q % 5
-                for j in range(cols):
-                    mid = 2 * ring[mid_row, j]
-                    t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
-                    t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
+                _comb_row(ring, r, cols, t1, t2)
                 if (r - 2) % comb_tile_rows == comb_tile_rows - 1:
-                    for t in range(tiles):
-                        if count < 2 and t1[t] > 6 * pixels and t1[t] > 3 * t2[t]:
-                            count += 1
-                        t1[t] = 0
-                        t2[t] = 0
+                    count = _combed_count(t1, t2, tiles, pixels, count)
         if q % 2 == 1 and q // 2 < h2:
             y = q // 2
             r0 = flat[q - 1]

@@ -198,9 +198,7 @@ class DotImage:
         key = 'view_small' if decimated else 'view_image'
         view = self._cache.get(key)
         if view is None:
-            source = self.small if decimated else self.image
-            view = (source if source.ndim == 3 else source[:, :, None]).view()
-            view.flags.writeable = False
+            view = _read_only(self.small if decimated else self.image)
             self._cache[key] = view
         return view
 
@@ -332,9 +330,7 @@ def _darkest_in(image: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.nda
         # OpenCV's vectorised erosion wins on big windows despite the copy.
         return _min_channel(np.ascontiguousarray(image[y0:y1, x0:x1]))
     # Read-only, as a ROS image's buffer is: one compiled signature.
-    view = image.view()
-    view.flags.writeable = False
-    return card_kernels.darkest_in(view, x0, y0, x1, y1)
+    return card_kernels.darkest_in(_read_only(image), x0, y0, x1, y1)
 
 
 def _min_channel(image: np.ndarray) -> np.ndarray:

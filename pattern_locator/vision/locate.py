@@ -35,6 +35,9 @@ class LocatedCard:
     distance_m: Optional[float]
     estimator: str
     problem: Optional[str] = None          # why there is no pose
+    # Exact estimator, a close planar flip: the other solution and how likely it is.
+    alternative: Optional[Pose] = None
+    other_probability: float = 0.0
 
     @property
     def camera_in_pattern(self) -> Optional[np.ndarray]:
@@ -96,7 +99,9 @@ class CardLocator:
             return _no_pose(card, 'exact', f'tilt {phi:.1f} deg below the minimum '
                                            f'{self.min_tilt_deg:.1f} deg')
         return LocatedCard(card, est.T_camera_pattern, est.covariance, est.reprojection_rms_px,
-                           est.ambiguity, psi, phi, theta, distance, 'exact')
+                           est.ambiguity, psi, phi, theta, distance, 'exact',
+                           alternative=est.alternative,
+                           other_probability=est.other_probability)
 
     def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
         from .pose_paper import estimate_paper

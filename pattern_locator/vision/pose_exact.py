@@ -12,14 +12,15 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
   current pose predicts (Heikkila 2000), and the pose refined again;
 * the solution with the lower reprojection error wins, unless the two are
   nearly equal (``ambiguity`` close to 1, the planar "flip"), where what is
-  known about the camera (a :class:`PosePrior`) decides;
+  known about the camera (a :class:`PosePrior`) decides, and the other
+  solution's probability is reported (``other_probability``);
 * the covariance is ``s^2 (J^T J)^-1`` with J the Jacobian of the
   reprojection with respect to the camera pose in the pattern frame.
 """
 
 from dataclasses import dataclass
 import math
-from typing import Dict, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -58,8 +59,8 @@ class PosePrior:
     previous_camera_in_pattern: Optional[np.ndarray] = None
     previous_sigma: float = 0.5
 
-    def penalty(self, T_camera_pattern: Pose) -> float:
-        """Chi-square-like disagreement of a pose with this prior."""
+    def penalty(self, T_camera_pattern: Pose, previous: bool = True) -> float:
+        """Chi-square-like disagreement of a pose with this prior (``previous``: its last term)."""
         total = 0.0
         if self.up_in_camera is not None:
             up = np.asarray(self.up_in_camera, dtype=float)
@@ -70,7 +71,7 @@ class PosePrior:
         camera = T_camera_pattern.inverse().t
         if self.camera_height is not None:
             total += ((camera[1] - self.camera_height) / self.height_sigma) ** 2
-        if self.previous_camera_in_pattern is not None:
+        if previous and self.previous_camera_in_pattern is not None:
             d = np.linalg.norm(camera - np.asarray(self.previous_camera_in_pattern))
             total += (d / self.previous_sigma) ** 2
         return total
@@ -87,6 +88,12 @@ class PoseEstimate:
     alternative: Optional[Pose]     # the other planar solution
     n_points: int
     chosen_by: str                  # 'reprojection' or 'prior'
+    # How likely the other planar solution is when the two are a close call
+    # (0.0: the image rules it out), from the residuals and the prior's up
+    # and height, not its last position (the localizer weighs continuity
+    # with its own jump test: gates.GateParameters.max_flip_probability).
+    # Above 0.5 when the last position chose the one the image likes less.
+    other_probability: float = 0.0
 
     @property
     def camera_in_pattern(self) -> np.ndarray:
@@ -117,20 +124,23 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     n = len(obj)
     rms = [math.sqrt(c[0] / n) for c in candidates]
     ambiguity = rms[1] / max(rms[0], 1e-9) if len(candidates) > 1 else math.inf
-    if ambiguity < ambiguity_threshold and prior is None:
-        # A close call decided by the image alone: compare the two at their
-        # own optimum. (With a prior, IPPE's residuals are close enough.)
+    best, chosen_by, other_probability = 0, 'reprojection', 0.0
+    if ambiguity < ambiguity_threshold:
+        # A close call: compare the two at their own optimum, then with what
+        # is known about the camera. How likely the other one still is
+        # (image and prior) tells the localizer whether the choice is sure.
         candidates = sorted((_refined_candidate(obj, observed, K, r, t)
                              for _, r, t, _ in candidates), key=lambda sol: sol[0])
         rms = [math.sqrt(c[0] / n) for c in candidates]
         ambiguity = rms[1] / max(rms[0], 1e-9)
-    best, chosen_by = 0, 'reprojection'
-    if prior is not None and len(candidates) > 1 and ambiguity < ambiguity_threshold:
-        sigma2 = max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2
-        costs = [c[0] / sigma2 + prior.penalty(Pose(c[1], c[2])) for c in candidates]
+        costs = _flip_costs(candidates, rms[0], pixel_sigma, prior)
         best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
+        # Without the last position: the localizer weighs continuity itself.
+        costs = _flip_costs(candidates, rms[0], pixel_sigma, prior, previous=False)
+        other_probability = 1.0 / (1.0 + math.exp(float(np.clip(
+            0.5 * (costs[1 - best] - costs[best]), -700.0, 700.0))))
     # (Each candidate carries its projection, made for its residual.) The
     # centres' bias correction depends only weakly on the pose: computed
     # from IPPE's pose it leaves a bias far below the noise after the
@@ -158,7 +168,23 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         alternative=Pose(other[1], other[2]) if other is not None else None,
         n_points=n,
         chosen_by=chosen_by,
+        other_probability=other_probability if other is not None else 0.0,
     )
+
+
+def _flip_costs(candidates, best_rms: float, pixel_sigma: Optional[float],
+                prior: Optional[PosePrior], previous: bool = True) -> List[float]:
+    """
+    Return each planar solution's cost: its squared residuals over the noise, plus the prior's.
+
+    The noise is the better fit's RMS per dot (both image axes together, so
+    twice a coordinate's variance), floored: the image's evidence is
+    counted at about half its weight, which makes the other solution's
+    probability an over-estimate, the safe side for a sure choice.
+    """
+    sigma2 = max(pixel_sigma or 0.0, best_rms, DEFAULT_MIN_SIGMA_PX) ** 2
+    return [c[0] / sigma2 + (prior.penalty(Pose(c[1], c[2]), previous) if prior is not None
+                             else 0.0) for c in candidates]
 
 
 def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,

@@ -138,6 +138,66 @@ def test_prior_resolves_the_flip_and_ambiguity_is_reported():
         0.25 * branches_apart)
 
 
+def flips_and_other_probabilities(T, prior, sigma_px, draws=300):
+    """Noisy views of one pose: (flipped, other_probability) each."""
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    truth = T.inverse().t
+    distance = float(np.linalg.norm(truth))
+    out = []
+    for seed in range(draws):
+        obs = ellipse_observations(camera, T, np.random.default_rng(seed), sigma_px)
+        est = estimate_exact(obs, camera, CFG, prior=prior)
+        error = np.linalg.norm(est.camera_in_pattern - truth)
+        other = np.linalg.norm(est.alternative.inverse().t - truth)
+        out.append((error > 0.05 * distance and other < 0.5 * error, est.other_probability))
+    return out
+
+
+def test_every_flip_that_up_cannot_decide_is_reported_unsure():
+    # Nearly face on at 5.7 m, the camera off to the side: the two planar
+    # solutions differ by a turn about the card's vertical axis, which
+    # leaves "up" where it was. One noise draw in ten picks the wrong one,
+    # more than a metre off; each such choice must say the other is likely.
+    T = pose_from(5.7, 6.0, 90.0)
+    prior = PosePrior(up_in_camera=T.R[:, 1], up_sigma_rad=math.radians(3.0))
+    results = flips_and_other_probabilities(T, prior, 0.05)
+    flipped = [p for flip, p in results if flip]
+    assert len(flipped) >= 10                     # the case is exercised
+    assert min(flipped) > 1e-3
+    assert all(0.0 < p <= 0.5 for _, p in results)
+
+
+def test_a_flip_that_up_decides_is_reported_sure():
+    # Turned about the card's horizontal axis the two solutions disagree on
+    # "up" by twice the view angle: the prior decides, and says so.
+    T = pose_from(8.0, 12.0, 180.0)
+    prior = PosePrior(up_in_camera=T.R[:, 1], up_sigma_rad=math.radians(3.0))
+    results = flips_and_other_probabilities(T, prior, 0.3)
+    assert not any(flip for flip, _ in results)
+    assert np.mean([p <= 1e-3 for _, p in results]) > 0.9
+    # An oblique view: the image alone rules the other solution out.
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(3.0, 45.0, 30.0)
+    est = estimate_exact(ellipse_observations(camera, T), camera, CFG, prior=prior)
+    assert est.ambiguity > 2.0 and est.other_probability == 0.0
+
+
+def test_other_probability_leaves_the_last_position_to_the_localizer():
+    # A last position at the other solution makes the prior choose it; the
+    # reported probability is the image's and up's alone, so the solution
+    # the image prefers is then the likelier "other" one.
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    T = pose_from(5.7, 6.0, 90.0)
+    obs = ellipse_observations(camera, T, np.random.default_rng(3), 0.05)
+    alone = estimate_exact(obs, camera, CFG)
+    assert alone.chosen_by == 'reprojection' and 0.0 < alone.other_probability < 0.5
+    prior = PosePrior(previous_camera_in_pattern=alone.alternative.inverse().t,
+                      previous_sigma=0.1)
+    swayed = estimate_exact(obs, camera, CFG, prior=prior)
+    assert swayed.chosen_by == 'prior'
+    assert swayed.other_probability == pytest.approx(1.0 - alone.other_probability, abs=1e-6)
+
+
 def test_wrong_shape_is_an_estimation_error():
     camera = CameraModel.from_focal(640, 480, 1000.0)
     with pytest.raises(EstimationError, match='expected 17 dot positions'):

@@ -21,6 +21,7 @@ a fix says why (``no_fix_reason``) and which gates refused what
 (``rejections``); :meth:`RobotLocalizer.rejection_counts` counts them.
 """
 
+import dataclasses
 from dataclasses import dataclass
 import math
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -28,7 +29,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .building import BuildingMap, MappedCard
-from .gates import BaseMotion, FixGates, GateParameters, Rejection
+from .gates import (BaseMotion, FixGates, FLIP_APART_MAHALANOBIS, GateParameters,
+                    mahalanobis_apart, Rejection)
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, HeadMotion, up_in_camera
 from .odom import BaseTwist
 from .uncertainty import fix_covariance, FixCovariance, UncertaintyParameters
@@ -37,7 +39,7 @@ from ..errors import CodeError, ConfigError
 from ..vision.camera import CameraModel
 from ..vision.detector import CardDetection
 from ..vision.geometry import Pose, rodrigues, rotation_vector
-from ..vision.locate import CardLocator
+from ..vision.locate import CardLocator, LocatedCard
 from ..vision.pose_exact import PosePrior
 
 OUTPUT_FRAMES = ('room', 'building')
@@ -183,6 +185,11 @@ class RobotLocalizer:
                                 f'{self.max_reprojection_px:.2f} px')
                 continue
             fix, rejection = self._fix(det, mapped, located, camera, motion, base_twist)
+            if rejection is None:
+                flip = self._unsure_flip(det, mapped, located, fix, camera, motion, base_twist,
+                                         stamp_s, odometry)
+                if flip is not None:
+                    rejection = self.gates.count(Rejection('planar_flip', flip))
             if rejection is None and det.slots_from_map:
                 rejection = self.gates.check_partial(fix.T_frame_base, fix.covariance,
                                                      fix.frame_id, stamp_s, odometry,
@@ -253,7 +260,9 @@ class RobotLocalizer:
                 continue
             fix, rejection = self._fix(option, mapped, located, camera, motion, twist,
                                        counted=False)
-            usable = rejection is None and not self._too_rough(located)
+            usable = rejection is None and not self._too_rough(located) and (
+                self._unsure_flip(option, mapped, located, fix, camera, motion, twist, stamp_s,
+                                  odometry) is None)
             covariance = fix.covariance
             if covariance is None or np.shape(covariance) != (6, 6) or \
                     not np.all(np.isfinite(covariance)):
@@ -273,6 +282,56 @@ class RobotLocalizer:
             'partial_code', f'{label}: {len(near)} of the {len(det.candidates)} mapped codes '
             'that fit the slots seen may be where its last fix puts the robot (one needed, '
             'passing the gates)'))
+
+    def _unsure_flip(self, det: CardDetection, mapped: MappedCard, located: LocatedCard,
+                     fix: RobotFix, camera: CameraModel, motion: HeadMotion,
+                     twist: Optional[BaseTwist], stamp_s: Optional[float],
+                     odometry: Optional[BaseMotion]) -> Optional[str]:
+        """
+        Return why a fix rests on an unsure choice between the card's two planar poses, or None.
+
+        Far away and nearly face on, a card fits its dots almost as well
+        turned the other way about an axis in its plane (the planar flip).
+        About a horizontal axis the head's "up" and the camera's height tell
+        the two apart; about the card's vertical axis nothing the robot
+        knows does, and the wrong one, a metre off with a covariance of
+        centimetres, wins often enough to matter. So when the other pose is
+        not ruled out by the image and the prior (``other_probability``
+        above ``max_flip_probability``) and puts the base elsewhere (the two
+        fixes more than ``FLIP_APART_MAHALANOBIS`` apart), the fix stands
+        only if a static gate refuses the other pose (outside the room,
+        behind the card, ...) or the last fix does: the chosen pose near
+        where it puts the robot, the other not. Nothing is counted here.
+        """
+        p = self.gates.parameters
+        if located.alternative is None or located.other_probability <= p.max_flip_probability:
+            return None
+        other_located = dataclasses.replace(located, T_camera_pattern=located.alternative)
+        other, refused = self._fix(det, mapped, other_located, camera, motion, twist,
+                                   counted=False)
+        if refused is not None and refused.reason not in ('not_finite', 'covariance'):
+            return None                         # the other pose is not where a robot can be
+        chance = f'the other planar pose {100.0 * located.other_probability:.2g} % likely'
+        if refused is not None:
+            return f'{chance}, and its fix has no usable covariance'
+        apart = mahalanobis_apart(fix.T_frame_base, fix.covariance, other.T_frame_base,
+                                  other.covariance)
+        if apart <= FLIP_APART_MAHALANOBIS:
+            return None                         # both put the robot at the same place
+        metres = float(np.linalg.norm(other.T_frame_base.t - fix.T_frame_base.t))
+        chosen = self.gates.distance_from_last(fix.T_frame_base, fix.covariance, fix.frame_id,
+                                               stamp_s, odometry)
+        rival = self.gates.distance_from_last(other.T_frame_base, other.covariance,
+                                              other.frame_id, stamp_s, odometry)
+        if chosen is None:
+            return (f'{chance} ({metres:.2f} m away), and no recent last fix to choose by: '
+                    'no fix until a view or the last fix decides')
+        # Continuity's evidence: the jump test's distances as likelihoods.
+        probability = _posterior(located.other_probability, chosen, rival)
+        if probability <= p.max_flip_probability:
+            return None
+        return (f'{chance} ({metres:.2f} m away), {100.0 * probability:.2g} % with the last '
+                f'fix (Mahalanobis {chosen:.3g} and {rival:.3g} from it): no fix')
 
     def _too_rough(self, located) -> bool:
         """Tell whether a located card's reprojection error is above the limit."""
@@ -339,6 +398,24 @@ class RobotLocalizer:
         return RobotFix(det.ids, frame_id, T_frame_base, covariance, T_camera_card, pan_to,
                         tilt_to, det.size_px, float(located.ambiguity or math.inf), 1,
                         terms), rejection
+
+
+def _posterior(other_probability: float, chosen_distance: float, rival_distance: float
+               ) -> float:
+    """
+    Return the other planar pose's probability once the last fix's evidence is in.
+
+    The odds from the image, up and height, times the likelihood ratio of
+    the two poses' jump-test distances (Mahalanobis) from where the last
+    fix puts the robot. Not finite: 1.0 (nothing shown).
+    """
+    if not (math.isfinite(chosen_distance) and math.isfinite(rival_distance)
+            and 0.0 <= other_probability <= 1.0):
+        return 1.0
+    p = min(max(other_probability, 1e-300), 1.0 - 1e-16)
+    log_odds = (math.log(p) - math.log1p(-p)
+                - 0.5 * (rival_distance ** 2 - chosen_distance ** 2))
+    return 1.0 / (1.0 + math.exp(min(-log_odds, 700.0)))
 
 
 def _head_motion(camera: CameraModel, centre_px: np.ndarray) -> Tuple[float, float]:

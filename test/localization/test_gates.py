@@ -137,7 +137,8 @@ def test_the_camera_must_be_in_front_of_the_card_at_a_plausible_distance():
 def test_parameters_are_checked():
     for bad in ({'max_speed_m_s': -1.0}, {'max_roll_deg': math.nan}, {'footprint': 'floor'},
                 {'confirm_first_fix': 1}, {'max_jump_mahalanobis': '5'},
-                {'min_camera_distance_m': 30.0}, {'min_base_height_m': 1.0}):
+                {'min_camera_distance_m': 30.0}, {'min_base_height_m': 1.0},
+                {'max_flip_probability': 0.6}):
         with pytest.raises(ConfigError, match='gates:'):
             GateParameters(**bad)
     assert GateParameters(min_base_height_m=-1.0).min_base_height_m == -1.0

@@ -35,6 +35,7 @@ import numpy as np
 from .baselines import make_locator, square_pose_solutions, tag_card_bitmap
 from .demo import PAPER_TABLE1
 from ..card.pattern import Ids, load_pattern_config, PatternConfig
+from ..localization.gates import GateParameters
 from ..sim.paper_setup import paper_camera
 from ..sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture,
                           Occluder, render_scene, RenderOptions)
@@ -47,6 +48,7 @@ from ..vision.pose_exact import (ellipse_centres, estimate_exact, paper_angles, 
 DISTANCE_BINS = ((1.25, 2.0), (2.0, 3.0), (3.0, 4.5), (4.5, 6.0), (6.0, 8.0))
 MARKERS = ('dots', 'apriltag', 'aruco')
 PRIOR_SIGMA_DEG = 3.0
+FLIP_GATE_PROBABILITY = GateParameters().max_flip_probability
 FLIP_FRACTION = 0.05      # a flip: error above 5 % of D, and the other solution half as far off
 
 
@@ -87,6 +89,9 @@ class Outcome:
     time_ms: float = math.nan
     flipped: bool = False
     flipped_without_prior: bool = False
+    # Ours: the other planar solution at least the localizer's flip gate's
+    # probability (so a locator would not take the pose without a decider).
+    flip_unsure: bool = False
     crb_samples: Optional[np.ndarray] = None
     dot_noise_px: float = math.nan
 
@@ -209,6 +214,7 @@ def run_dots(locator: CardLocator, camera: CameraModel, scene: Scene, image: np.
             flipped = _is_flip(est.T_camera_pattern, est.alternative, T, scene.distance)
             if use_prior:
                 out.flipped = flipped
+                out.flip_unsure = est.other_probability > FLIP_GATE_PROBABILITY
             else:
                 out.flipped_without_prior = flipped
         # Dot-centre noise against the true ellipse centres, and the bound for it.
@@ -391,14 +397,20 @@ def quick_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
 
 def flip_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
     lines = ['\n### Planar flips (the chosen solution > 5 % of D off, the other one at most '
-             'half as far), with and without the up prior',
-             f'{"marker":<9}{"bin (m)":<10}{"found":>6}{"with prior":>11}{"without":>9}']
+             'half as far), with and without the up prior; dots: poses whose other '
+             f'solution is > {FLIP_GATE_PROBABILITY:g} likely (unsure: the locator takes '
+             'them only when a gate or its last fix decides), and flips among them',
+             f'{"marker":<9}{"bin (m)":<10}{"found":>6}{"with prior":>11}{"without":>9}'
+             f'{"unsure":>8}{"unsure flips":>14}']
     for m in MARKERS:
         for b, (near, far) in enumerate(DISTANCE_BINS):
             found = [o for s, o in results[m] if s.bin_index == b and o.found]
+            unsure = (f'{sum(o.flip_unsure for o in found):>8}'
+                      f'{sum(o.flip_unsure and o.flipped for o in found):>14}'
+                      if m == 'dots' else f'{"-":>8}{"-":>14}')
             lines.append(f'{m:<9}{f"{near:g}-{far:g}":<10}{len(found):>6}'
                          f'{sum(o.flipped for o in found):>11}'
-                         f'{sum(o.flipped_without_prior for o in found):>9}')
+                         f'{sum(o.flipped_without_prior for o in found):>9}{unsure}')
     return '\n'.join(lines)
 
 

@@ -17,10 +17,13 @@ import numpy as np
 from . import __version__
 from .card.pattern import load_pattern_config
 from .errors import ConfigError, ImageError, PatternLocatorError
+from .localization.gates import GateParameters
 from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
+# detect's text shows the other planar pose above the locator's default flip gate.
+UNSURE_FLIP = GateParameters().max_flip_probability
 DEMO_ROUTES = ('loop', 'tour', 'short', 'paper-stops')
 
 
@@ -410,6 +413,8 @@ def card_json(card: LocatedCard) -> dict:
         'covariance': None,
         'reprojection_rms_px': None,
         'ambiguity': None,
+        'other_probability': None,
+        'other_camera_in_pattern_m': None,
         'psi_deg': None, 'phi_deg': None, 'theta_deg': None, 'distance_m': None,
     }
     if card.T_camera_pattern is not None:
@@ -424,6 +429,10 @@ def card_json(card: LocatedCard) -> dict:
             out['covariance'] = [[float(f'{v:.4g}') for v in row] for row in card.covariance]
         if card.ambiguity is not None and math.isfinite(card.ambiguity):
             out['ambiguity'] = round(float(card.ambiguity), 3)
+        if card.estimator == 'exact':
+            out['other_probability'] = float(f'{card.other_probability:.3g}')
+            if card.other_probability > 0.0 and card.alternative is not None:
+                out['other_camera_in_pattern_m'] = _rounded(card.alternative.inverse().t, 5)
     else:
         out['problem'] = card.problem
     return out
@@ -455,6 +464,11 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
         if card.ambiguity is not None and math.isfinite(card.ambiguity):
             extra += f'   ambiguity {card.ambiguity:.2f}'
         print(extra)
+        if card.other_probability > UNSURE_FLIP and card.alternative is not None:
+            x, y, z = card.alternative.inverse().t
+            print(f'    other planar pose {100.0 * card.other_probability:.2g} % likely: camera '
+                  f'at x {x:+.3f} y {y:+.3f} z {z:+.3f} m (the image alone does not decide; on '
+                  "a robot, up, the camera's height or the last fix may)")
 
 
 # bench and demo ---------------------------------------------------------------------

@@ -52,6 +52,8 @@ def scene(tmp_path_factory):
     T_far = card_pose_facing(3.5, 30.0, 250.0, -10.0, (170.0, 60.0), CAMERA)
     T_near = card_pose_facing(1.6, 35.0, 60.0, 5.0, (-160.0, -40.0), CAMERA)
     T_flat = card_pose_facing(2.0, 10.0, 30.0, 0.0, (20.0, 10.0), CAMERA)
+    # Far and nearly face on: the two planar poses fit almost equally.
+    T_faceon = card_pose_facing(5.7, 5.0, 90.0, 0.0, (0.0, 0.0), CAMERA)
     options = {'noise_sigma': 1.5, 'defocus_sigma_px': 0.5, 'seed': 1}
     # Outer point 7 behind a small pale object.
     patch = np.array([[-0.135, -0.02], [-0.095, -0.02], [-0.095, 0.02], [-0.135, 0.02]])
@@ -62,6 +64,7 @@ def scene(tmp_path_factory):
             occluders=(Occluder(0, patch, (0.8, 0.8, 0.75)),), **options)),
         'none.png': ([], RenderOptions(background='clutter', **options)),
         'flat.png': ([(T_flat, CODE)], RenderOptions(**options)),
+        'faceon.png': ([(T_faceon, CODE)], RenderOptions(**options)),
     }
     paths = {}
     for name, (cards, opts) in images.items():
@@ -70,7 +73,8 @@ def scene(tmp_path_factory):
         assert cv2.imwrite(paths[name], render_scene(CAMERA, placements, opts).image)
     paths['camera'] = str(root / 'camera.yaml')
     save_camera(CAMERA, paths['camera'])
-    return root, paths, {'one': T, 'near': T_near, 'far': T_far, 'flat': T_flat}
+    return root, paths, {'one': T, 'near': T_near, 'far': T_far, 'flat': T_flat,
+                         'faceon': T_faceon}
 
 
 def detect(capsys, *args):
@@ -183,6 +187,24 @@ def test_detect_text(scene, capsys):
     position = np.array([float(v) for v in match.groups()[:3]])
     assert np.linalg.norm(position - poses['one'].inverse().t) < 0.01
     assert float(match.group(4)) == pytest.approx(2.0, abs=0.01)
+
+
+def test_detect_reports_the_other_planar_pose_when_the_image_cannot_decide(scene, capsys):
+    _, paths, poses = scene
+    status, out, _ = detect(capsys, paths['faceon.png'], paths['one.png'], '--camera',
+                            paths['camera'], '--json')
+    faceon, one = (lines['patterns'][0] for lines in json_lines(out))
+    assert status == 0
+    assert 1e-3 < faceon['other_probability'] <= 0.5
+    truth = poses['faceon'].inverse().t
+    positions = [np.array(faceon['camera_in_pattern_m']),
+                 np.array(faceon['other_camera_in_pattern_m'])]
+    # One of the two is the truth; they are apart (a turn about an axis in the card).
+    assert min(np.linalg.norm(p - truth) for p in positions) < 0.05 * 5.7
+    assert np.linalg.norm(positions[0] - positions[1]) > 0.1
+    assert one['other_probability'] == 0.0 and one['other_camera_in_pattern_m'] is None
+    status, out, _ = detect(capsys, paths['faceon.png'], '--camera', paths['camera'])
+    assert status == 0 and re.search(r'other planar pose \S+ % likely: camera at x', out), out
 
 
 # Errors ----------------------------------------------------------------------------------

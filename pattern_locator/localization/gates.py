@@ -53,13 +53,10 @@ REASONS = (
     'partial_code',              # a card partly hidden, its code completed from the map
                                  # (or one of several codes that fit), not where the last
                                  # fix puts the robot, or no last fix to choose by
-    'planar_flip',               # the card's other planar pose fits nearly as well, puts
-                                 # the robot elsewhere, and nothing rules it out
+    'planar_flip',               # the card's other planar pose fits nearly as well and
+                                 # neither a gate nor the last fix rules it out
 )
 FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
-# The two planar poses of a card put the base at one place when they are
-# this close (Mahalanobis, both fixes' covariances): a 95 % overlap.
-FLIP_APART_MAHALANOBIS = 2.0
 # Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.
 ADJACENT_MIN_LENGTH_M = 0.5
 
@@ -120,14 +117,13 @@ class GateParameters:
     # time since, and a card missing from the map that reads as a mapped one
     # hanging elsewhere must not fall within that.
     partial_code_max_age_s: float = 1.0
-    # The planar flip: a card seen nearly face on fits its dots almost as
-    # well turned the other way about an axis in its plane. When the other
-    # pose is at least this likely (the estimator's other_probability, from
-    # the residuals and what the robot knows) and puts the base elsewhere
-    # (beyond max_jump_mahalanobis of the chosen), it must be ruled out by a
-    # static gate or by the last fix (as a partly hidden card's code is,
-    # within partial_code_max_age_s), or the card gives no fix. (Elsewhere:
-    # more than FLIP_APART_MAHALANOBIS apart, both fixes' covariances.)
+    # The planar flip: a card seen far away and nearly face on fits its dots
+    # almost as well turned the other way about an axis in its plane. When
+    # the other pose is more likely than this (the estimator's
+    # other_probability, from the residuals, up and height), a static gate
+    # or the last fix (within partial_code_max_age_s, its jump test's
+    # distances as likelihoods) must bring it below, or the card gives no
+    # fix.
     max_flip_probability: float = 0.001
 
     def __post_init__(self) -> None:
@@ -495,23 +491,6 @@ def _check_covariance(covariance: np.ndarray, max_sigma_m: float) -> Optional[Re
         return Rejection('covariance', f'position uncertain by {sigma:.3g} m (limit '
                          f'{max_sigma_m:g} m)')
     return None
-
-
-def mahalanobis_apart(T_a: Pose, covariance_a: np.ndarray, T_b: Pose,
-                      covariance_b: np.ndarray) -> float:
-    """
-    Return how far apart two fixes of one image are, in one frame: Mahalanobis, both covariances.
-
-    Without the jump test's floors: two readings of the same dots, not two
-    moments of a moving robot. Infinite when it cannot be computed.
-    """
-    delta = _difference(T_a, T_b)
-    total = np.asarray(covariance_a, dtype=float) + np.asarray(covariance_b, dtype=float)
-    try:
-        d2 = float(delta @ np.linalg.solve(total, delta))
-    except np.linalg.LinAlgError:
-        return math.inf
-    return math.sqrt(d2) if d2 >= 0.0 and math.isfinite(d2) else math.inf
 
 
 def _difference(a: Pose, b: Pose) -> np.ndarray:

@@ -29,8 +29,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .building import BuildingMap, MappedCard
-from .gates import (BaseMotion, FixGates, FLIP_APART_MAHALANOBIS, GateParameters,
-                    mahalanobis_apart, Rejection)
+from .gates import BaseMotion, FixGates, GateParameters, Rejection
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, HeadMotion, up_in_camera
 from .odom import BaseTwist
 from .uncertainty import fix_covariance, FixCovariance, UncertaintyParameters
@@ -295,13 +294,16 @@ class RobotLocalizer:
         About a horizontal axis the head's "up" and the camera's height tell
         the two apart; about the card's vertical axis nothing the robot
         knows does, and the wrong one, a metre off with a covariance of
-        centimetres, wins often enough to matter. So when the other pose is
-        not ruled out by the image and the prior (``other_probability``
-        above ``max_flip_probability``) and puts the base elsewhere (the two
-        fixes more than ``FLIP_APART_MAHALANOBIS`` apart), the fix stands
-        only if a static gate refuses the other pose (outside the room,
-        behind the card, ...) or the last fix does: the chosen pose near
-        where it puts the robot, the other not. Nothing is counted here.
+        centimetres, wins often enough to matter. Nearer face on still the
+        two merge into one pose between them, whose tilt the dots' sub-pixel
+        errors set (half a metre off at 5.8 m, four to eight sigmas, as the
+        card's image shifts by fractions of a pixel). So when the other pose
+        is not ruled out by the image and the prior (``other_probability``
+        above ``max_flip_probability``), the fix stands only if a static
+        gate refuses the other pose (outside the room, behind the card, ...)
+        or the last fix makes it that unlikely (the jump test's distances of
+        the two as likelihoods; never when they are one pose). Nothing is
+        counted here.
         """
         p = self.gates.parameters
         if located.alternative is None or located.other_probability <= p.max_flip_probability:
@@ -311,27 +313,28 @@ class RobotLocalizer:
                                    counted=False)
         if refused is not None and refused.reason not in ('not_finite', 'covariance'):
             return None                         # the other pose is not where a robot can be
-        chance = f'the other planar pose {100.0 * located.other_probability:.2g} % likely'
+        metres = float(np.linalg.norm(other.T_frame_base.t - fix.T_frame_base.t))
+        if metres < 0.01:
+            chance = ('its two planar poses are one: seen this far and this nearly face on, '
+                      'the card does not show which way it is turned')
+        else:
+            chance = (f'the other planar pose {100.0 * located.other_probability:.2g} % likely '
+                      f'({metres:.2f} m away)')
         if refused is not None:
             return f'{chance}, and its fix has no usable covariance'
-        apart = mahalanobis_apart(fix.T_frame_base, fix.covariance, other.T_frame_base,
-                                  other.covariance)
-        if apart <= FLIP_APART_MAHALANOBIS:
-            return None                         # both put the robot at the same place
-        metres = float(np.linalg.norm(other.T_frame_base.t - fix.T_frame_base.t))
         chosen = self.gates.distance_from_last(fix.T_frame_base, fix.covariance, fix.frame_id,
                                                stamp_s, odometry)
         rival = self.gates.distance_from_last(other.T_frame_base, other.covariance,
                                               other.frame_id, stamp_s, odometry)
         if chosen is None:
-            return (f'{chance} ({metres:.2f} m away), and no recent last fix to choose by: '
-                    'no fix until a view or the last fix decides')
+            return (f'{chance}, and no recent last fix to choose by: no fix until a view or '
+                    'the last fix decides')
         # Continuity's evidence: the jump test's distances as likelihoods.
         probability = _posterior(located.other_probability, chosen, rival)
         if probability <= p.max_flip_probability:
             return None
-        return (f'{chance} ({metres:.2f} m away), {100.0 * probability:.2g} % with the last '
-                f'fix (Mahalanobis {chosen:.3g} and {rival:.3g} from it): no fix')
+        return (f'{chance}; {100.0 * probability:.2g} % with the last fix (Mahalanobis '
+                f'{chosen:.3g} and {rival:.3g} from it): no fix')
 
     def _too_rough(self, located) -> bool:
         """Tell whether a located card's reprojection error is above the limit."""

@@ -197,9 +197,9 @@ _GATE_DESCRIPTIONS: Dict[str, Tuple[str, Any, Any]] = {
                           3600.0),
     'partial_code_max_age_s': ("a partly hidden card's code is taken from the map only this "
                                'soon after the last fix (s)', 0.0, 60.0),
-    'max_flip_probability': ('a card whose other planar pose is more likely than this, and puts '
-                             'the base elsewhere, gives a fix only when a gate or the last fix '
-                             'rules that pose out', 0.0, 0.5),
+    'max_flip_probability': ('a card whose other planar pose is more likely than this gives a '
+                             'fix only when a gate or the last fix rules that pose out', 0.0,
+                             0.5),
 }
 
 

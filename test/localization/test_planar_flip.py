@@ -78,10 +78,11 @@ def test_an_unsure_flip_gives_no_fix_from_scratch(far_images):
     off = GateParameters(confirm_first_fix=False, max_flip_probability=0.5)
     ungated = errors_from_scratch(far_images, off)
     assert max(e for e, _, _ in ungated) > 0.6
+    # Gated, no image of this view gives a fix from scratch: in each the
+    # other pose is likely or the two are one.
     gated = errors_from_scratch(far_images, GateParameters(confirm_first_fix=False))
     refused = [r for e, r, _ in gated if e is None]
-    assert all(e is None or e < 0.4 for e, _, _ in gated)
-    assert len(refused) >= 5
+    assert len(refused) == len(gated)
     for result in refused:
         assert result.rejections == ('planar_flip',)
         reason = result.no_fix_reason
@@ -91,8 +92,9 @@ def test_an_unsure_flip_gives_no_fix_from_scratch(far_images):
 
 def test_the_last_fix_decides_an_unsure_flip(far_images):
     # A sure fix from the near card, then the far card from the same place:
-    # the last fix rules the other pose out in most images, and no fix is
-    # the wrong pose.
+    # the last fix rules the other pose out in some images, and no fix is
+    # the wrong pose. (Their errors, 0.2-0.3 m, are the dots' sub-pixel
+    # errors at 1.4 px radius, the same in every image of one view.)
     localizer = RobotLocalizer(PATTERN, FLIP_MAP, HEAD)
     near_pan, near_tilt = aim(2)
     stamp = 0.0
@@ -110,5 +112,5 @@ def test_the_last_fix_decides_an_unsure_flip(far_images):
             errors.append(np.linalg.norm(result.fix.T_frame_base.t - ROBOT.t))
         else:
             assert result.rejections == ('planar_flip',)
-    assert len(errors) >= len(images) // 2
+    assert len(errors) >= 3
     assert max(errors) < 0.4

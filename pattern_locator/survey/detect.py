@@ -6,8 +6,10 @@ Detection is the survey's cost and is independent per frame, so frames go to
 (memory stays bounded on a 100k-frame bag), results back in order. Each
 worker decodes the image, runs the same locator as the node
 (``CardLocator``, exact estimator: pose and Fisher covariance) and returns
-small :class:`~.sightings.Sighting` values. With ``jobs == 1`` everything
-runs in this process.
+small :class:`~.sightings.Sighting` values, less the poses whose other
+planar solution is as likely as the locator's flip gate allows (counted in
+``DetectionStats.unsure_flips``). With ``jobs == 1`` everything runs in this
+process.
 """
 
 from collections import deque
@@ -23,11 +25,15 @@ from .bagio import BagData, camera_on_base, decode_image, iter_images, Mount
 from .sightings import Sighting
 from ..card.pattern import PatternConfig
 from ..errors import PatternLocatorError
+from ..localization.gates import GateParameters
 from ..vision.camera import CameraModel
 from ..vision.pose_exact import PosePrior
 
 # Frames in flight per worker: enough to keep the workers busy, few enough to bound memory.
 IN_FLIGHT_PER_JOB = 4
+# A pose whose other planar solution is more likely than the locator's
+# flip gate allows is no sighting (see _detect).
+MAX_FLIP_PROBABILITY = GateParameters().max_flip_probability
 
 
 @dataclass(frozen=True)
@@ -42,6 +48,9 @@ class DetectionStats:
     wall_s: float
     cpu_s: float            # summed over the workers' frames (detection, decoding included)
     jobs: int
+    # Poses left out because the other planar pose was as likely as the
+    # locator's flip gate allows (a card far away and nearly face on).
+    unsure_flips: int = 0
 
 
 _LOCATOR = None
@@ -53,8 +62,13 @@ def _init_worker(pattern: PatternConfig) -> None:
     _LOCATOR = CardLocator(pattern, estimator='exact')
 
 
-def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float]:
-    """Locate the cards of one frame; return (bag, frame, stamp, sightings, problem, seconds)."""
+def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float, int]:
+    """
+    Locate the cards of one frame.
+
+    Return (bag, frame, stamp, sightings, problem, seconds, poses left out
+    as unsure planar flips).
+    """
     bag, frame, stamp, raw, camera, up = task
     start = time.process_time()
     try:
@@ -65,12 +79,19 @@ def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float]:
         prior = PosePrior(up_in_camera=up) if up is not None else None
         located = _LOCATOR.locate(image, camera, prior)
     except PatternLocatorError as exc:
-        return bag, frame, stamp, [], str(exc), time.process_time() - start
+        return bag, frame, stamp, [], str(exc), time.process_time() - start, 0
     out = []
+    unsure = 0
     for card in located:
         if card.T_camera_pattern is None or card.covariance is None:
             continue
         if not np.all(np.isfinite(card.covariance)):
+            continue
+        if card.other_probability > MAX_FLIP_PROBABILITY:
+            # Its covariance does not know the other pose, a metre off at
+            # 6 m: one such sighting, or several at the fold, would pull
+            # the card's place.
+            unsure += 1
             continue
         det = card.detection
         out.append(Sighting(bag, frame, stamp, str(det.code), det.ids.as_tuple(),
@@ -78,7 +99,7 @@ def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float]:
                             float(card.reprojection_rms_px),
                             float(card.ambiguity if card.ambiguity is not None else np.inf),
                             int(det.n_points), np.asarray(det.points_px, dtype=float)))
-    return bag, frame, stamp, out, None, time.process_time() - start
+    return bag, frame, stamp, out, None, time.process_time() - start, unsure
 
 
 def _tasks(bags: Sequence[BagData], mounts: Sequence[Mount]) -> Iterable[tuple]:
@@ -113,16 +134,17 @@ def detect_bags(bags: Sequence[BagData], mounts: Sequence[Mount], pattern: Patte
     total = sum(b.n_images for b in bags)
     bar = tqdm(total=total, unit='frame', desc='detect', disable=None if progress else True)
     sightings: List[Sighting] = []
-    frames = with_cards = bad = 0
+    frames = with_cards = bad = unsure = 0
     first_problem = ''
     cpu = 0.0
     start = time.perf_counter()
 
     def take(result) -> None:
-        nonlocal frames, with_cards, bad, first_problem, cpu
-        _, _, _, found, problem, seconds = result
+        nonlocal frames, with_cards, bad, first_problem, cpu, unsure
+        _, _, _, found, problem, seconds, flips = result
         frames += 1
         cpu += seconds
+        unsure += flips
         if problem is not None:
             bad += 1
             first_problem = first_problem or problem
@@ -149,5 +171,5 @@ def detect_bags(bags: Sequence[BagData], mounts: Sequence[Mount], pattern: Patte
     finally:
         bar.close()
     stats = DetectionStats(frames, len(sightings), with_cards, bad, first_problem,
-                           time.perf_counter() - start, cpu, jobs)
+                           time.perf_counter() - start, cpu, jobs, unsure)
     return sightings, stats

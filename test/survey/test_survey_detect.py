@@ -1,0 +1,32 @@
+"""The survey's detection: a pose whose planar flip is unsure is no sighting."""
+
+from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
+                                        render_scene, RenderOptions)
+from pattern_locator.survey import detect
+from pattern_locator.survey.bagio import IMAGE_TYPE, typestore
+from pattern_locator.survey.record import _image
+from pattern_locator.vision.camera import CameraModel
+
+CFG = PatternConfig()
+CAMERA = CameraModel.from_focal(640, 480, 1000.0)
+
+
+def task(frame, distance, tilt_deg, azimuth_deg, offset_px):
+    """Return a survey frame of one card (detect._detect's task), no up known."""
+    T = card_pose_facing(distance, tilt_deg, azimuth_deg, 0.0, offset_px, CAMERA)
+    card = CardPlacement(T, DotCardTexture(CFG, CFG.encode(1, 3, 1)))
+    options = RenderOptions(noise_sigma=1.5, defocus_sigma_px=0.5, seed=1)
+    image = render_scene(CAMERA, [card], options).image
+    ts = typestore()
+    return 0, frame, 0, ts.serialize_cdr(_image(ts, 0, image), IMAGE_TYPE), CAMERA, None
+
+
+def test_a_far_card_nearly_face_on_is_counted_not_sighted():
+    detect._init_worker(CFG)
+    # 5.7 m away, 5 deg off face on: the other planar pose is likely.
+    _, _, _, sightings, problem, _, unsure = detect._detect(task(0, 5.7, 5.0, 90.0, (0, 0)))
+    assert problem is None and sightings == [] and unsure == 1
+    # 2 m away, 40 deg off: the image rules the other pose out.
+    _, _, _, sightings, problem, _, unsure = detect._detect(task(1, 2.0, 40.0, 30.0, (20, 10)))
+    assert problem is None and len(sightings) == 1 and unsure == 0

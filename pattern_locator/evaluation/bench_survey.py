@@ -41,7 +41,7 @@ from ..card.pattern import load_pattern_config
 from ..sim.walk import (drift_odometry, FloorPlan, make_walk, OdometryDrift, paper_room_plan,
                         ring_floor_plan, room_corridor_plan, Walk, WalkRenderer)
 from ..survey.align import apply, fit_transform
-from ..survey.detect import default_jobs
+from ..survey.detect import default_jobs, sightings_of
 from ..survey.graph import BagMotion, optimise, SurveyOptions
 from ..survey.record import default_survey_camera
 from ..survey.sightings import Sighting
@@ -73,15 +73,8 @@ def _render_and_detect(frame: int):
     located = _WORKER['locator'].locate(image, camera, PosePrior(up_in_camera=up))
     cpu = time.process_time() - start
     stamp = round(float(walk.times_s[sample]) * 1e9)
-    out = []
-    for card in located:
-        if card.T_camera_pattern is None or card.covariance is None:
-            continue
-        det = card.detection
-        out.append(Sighting(0, frame, stamp, str(det.code), det.ids.as_tuple(),
-                            card.T_camera_pattern, np.asarray(card.covariance),
-                            float(card.reprojection_rms_px), float(card.ambiguity or np.inf),
-                            int(det.n_points), np.asarray(det.points_px)))
+    # As the survey takes them (survey/detect.py): no unsure planar flip.
+    out, _ = sightings_of(located, 0, frame, stamp)
     return out, cpu
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import multiprocessing
 import os
 import time
-from typing import Iterable, List, Optional, Sequence, Tuple
+from typing import Iterable, List, Optional, Sequence, Tuple, TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from ..errors import PatternLocatorError
 from ..localization.gates import GateParameters
 from ..vision.camera import CameraModel
 from ..vision.pose_exact import PosePrior
+
+if TYPE_CHECKING:       # the detector's compiled passes load in the workers only
+    from ..vision.locate import LocatedCard
 
 # Frames in flight per worker: enough to keep the workers busy, few enough to bound memory.
 IN_FLIGHT_PER_JOB = 4
@@ -62,6 +65,35 @@ def _init_worker(pattern: PatternConfig) -> None:
     _LOCATOR = CardLocator(pattern, estimator='exact')
 
 
+def sightings_of(located: Sequence['LocatedCard'], bag: int, frame: int, stamp: int
+                 ) -> Tuple[List[Sighting], int]:
+    """
+    Return a frame's sightings from its located cards, and how many were unsure flips.
+
+    A card with no pose or a non-finite covariance is no sighting; nor is
+    one whose other planar pose is more likely than the locator's flip gate
+    allows: its covariance does not know that pose, a metre off at 6 m, and
+    one such sighting, or several at the fold, would pull the card's place.
+    """
+    out: List[Sighting] = []
+    unsure = 0
+    for card in located:
+        if card.T_camera_pattern is None or card.covariance is None:
+            continue
+        if not np.all(np.isfinite(card.covariance)):
+            continue
+        if card.other_probability > MAX_FLIP_PROBABILITY:
+            unsure += 1
+            continue
+        det = card.detection
+        out.append(Sighting(bag, frame, stamp, str(det.code), det.ids.as_tuple(),
+                            card.T_camera_pattern, np.asarray(card.covariance, dtype=float),
+                            float(card.reprojection_rms_px),
+                            float(card.ambiguity if card.ambiguity is not None else np.inf),
+                            int(det.n_points), np.asarray(det.points_px, dtype=float)))
+    return out, unsure
+
+
 def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float, int]:
     """
     Locate the cards of one frame.
@@ -80,25 +112,7 @@ def _detect(task) -> Tuple[int, int, int, List[Sighting], Optional[str], float, 
         located = _LOCATOR.locate(image, camera, prior)
     except PatternLocatorError as exc:
         return bag, frame, stamp, [], str(exc), time.process_time() - start, 0
-    out = []
-    unsure = 0
-    for card in located:
-        if card.T_camera_pattern is None or card.covariance is None:
-            continue
-        if not np.all(np.isfinite(card.covariance)):
-            continue
-        if card.other_probability > MAX_FLIP_PROBABILITY:
-            # Its covariance does not know the other pose, a metre off at
-            # 6 m: one such sighting, or several at the fold, would pull
-            # the card's place.
-            unsure += 1
-            continue
-        det = card.detection
-        out.append(Sighting(bag, frame, stamp, str(det.code), det.ids.as_tuple(),
-                            card.T_camera_pattern, np.asarray(card.covariance, dtype=float),
-                            float(card.reprojection_rms_px),
-                            float(card.ambiguity if card.ambiguity is not None else np.inf),
-                            int(det.n_points), np.asarray(det.points_px, dtype=float)))
+    out, unsure = sightings_of(located, bag, frame, stamp)
     return bag, frame, stamp, out, None, time.process_time() - start, unsure
 
 

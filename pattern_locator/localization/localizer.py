@@ -314,12 +314,13 @@ class RobotLocalizer:
         if refused is not None and refused.reason not in ('not_finite', 'covariance'):
             return None                         # the other pose is not where a robot can be
         metres = float(np.linalg.norm(other.T_frame_base.t - fix.T_frame_base.t))
+        # One leading phrase for every message: the node counts problems by it.
         if metres < 0.01:
-            chance = ('its two planar poses are one: seen this far and this nearly face on, '
-                      'the card does not show which way it is turned')
+            chance = ('planar flip unsure: its two poses are one (seen this far and this '
+                      'nearly face on, the card does not show which way it is turned)')
         else:
-            chance = (f'the other planar pose {100.0 * located.other_probability:.2g} % likely '
-                      f'({metres:.2f} m away)')
+            chance = (f'planar flip unsure: the other pose '
+                      f'{100.0 * located.other_probability:.2g} % likely ({metres:.2f} m away)')
         if refused is not None:
             return f'{chance}, and its fix has no usable covariance'
         chosen = self.gates.distance_from_last(fix.T_frame_base, fix.covariance, fix.frame_id,

@@ -239,7 +239,8 @@ class ProblemLog:
             else:
                 self._unlogged[kind] = self._unlogged.get(kind, 0) + 1
         if due:
-            more = f' ({skipped} more {kind} problems since the last report)' if skipped else ''
+            more = (f" ({skipped} more '{kind}' problems since the last report)" if skipped
+                    else '')
             self.logger.warning(f'{text}{more}')
 
     def snapshot(self) -> Tuple[Dict[str, int], str]:

@@ -44,3 +44,14 @@ def test_problems_are_throttled_by_kind_and_cut():
     assert len([line for line in logger.lines if 'encoding' in line]) == 1
     assert all(len(line) < 300 and '\n' not in line for line in logger.lines)
     assert '\n' not in last
+    # Once the period is over, a line says how many of its kind it left out,
+    # the kind quoted: a kind is the leading words of a rejection.
+    log = ProblemLog(logger, period_s=0.0)
+    log.report('rejected: position uncertain by', 'card K-KRGBGRBB: position uncertain by 1 m')
+    log.period_s = 3600.0
+    for _ in range(3):
+        log.report('rejected: position uncertain by', 'card K-KRGBGRBB: position uncertain')
+    log.period_s = 0.0
+    log.report('rejected: position uncertain by', 'card K-KRGBGRBB: position uncertain by 2 m')
+    assert logger.lines[-1].endswith(
+        "(3 more 'rejected: position uncertain by' problems since the last report)")

@@ -3,6 +3,7 @@
 import math
 import re
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 from pattern_locator.localization.building import building_from_dict
 from pattern_locator.localization.gates import GateParameters
@@ -56,6 +57,22 @@ def test_continuity_weighs_in_as_a_likelihood_ratio():
     for bad in ((0.25, math.nan, 1.0), (0.25, 1.0, math.inf), (math.nan, 1.0, 2.0)):
         assert _posterior(*bad) == 1.0
     assert _posterior(0.0, 0.0, 0.0) < 1e-200 and _posterior(1.0, 0.0, 0.0) > 1.0 - 1e-12
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-1.0, 2.0), st.floats(0.0, 50.0), st.floats(0.0, 50.0),
+       st.floats(0.0, 50.0))
+def test_the_posterior_is_a_probability_a_farther_rival_lowers(p, chosen, rival, farther):
+    # Whatever comes in (a probability out of range, distances far apart),
+    # a probability comes out, never NaN; moving the rival farther from the
+    # last fix can only make it less likely, the chosen farther more.
+    q = _posterior(p, chosen, rival)
+    assert 0.0 <= q <= 1.0
+    if not 0.0 <= p <= 1.0:
+        assert q == 1.0
+        return
+    assert _posterior(p, chosen, rival + farther) <= q
+    assert _posterior(p, chosen + farther, rival) >= q
 
 
 def errors_from_scratch(far_images, gates):

@@ -6,6 +6,7 @@ it holds no ROS types.
 """
 
 from dataclasses import dataclass
+import math
 from typing import Iterable, List, Optional
 
 import numpy as np
@@ -35,9 +36,11 @@ class LocatedCard:
     distance_m: Optional[float]
     estimator: str
     problem: Optional[str] = None          # why there is no pose
-    # Exact estimator, a close planar flip: the other solution and how likely it is.
+    # Exact estimator, a close planar flip: the other solution, how likely it
+    # is and how high the fit's cost rises between the two (PoseEstimate).
     alternative: Optional[Pose] = None
     other_probability: float = 0.0
+    flip_barrier: float = math.inf
 
     @property
     def camera_in_pattern(self) -> Optional[np.ndarray]:
@@ -101,7 +104,8 @@ class CardLocator:
         return LocatedCard(card, est.T_camera_pattern, est.covariance, est.reprojection_rms_px,
                            est.ambiguity, psi, phi, theta, distance, 'exact',
                            alternative=est.alternative,
-                           other_probability=est.other_probability)
+                           other_probability=est.other_probability,
+                           flip_barrier=est.flip_barrier)
 
     def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
         from .pose_paper import estimate_paper

@@ -29,7 +29,7 @@ from .camera import CameraModel
 from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
                           point_residuals, pose_covariance_matrix, project_points,
                           refine_exact, refine_pose)
-from .geometry import Pose
+from .geometry import Pose, rodrigues, rotation_vector
 from .per_config import made_once
 from ..card.pattern import PatternConfig
 from ..errors import EstimationError
@@ -94,6 +94,11 @@ class PoseEstimate:
     # with its own jump test: gates.GateParameters.max_flip_probability).
     # Above 0.5 when the last position chose the one the image likes less.
     other_probability: float = 0.0
+    # How far the fit's cost rises (as other_probability counts it) on the
+    # way from the chosen solution to the other: low, the two lie in one
+    # flat valley (near face on and far), where the chosen pose's own
+    # covariance does not hold (_flip_barrier). inf when not a close call.
+    flip_barrier: float = math.inf
 
     @property
     def camera_in_pattern(self) -> np.ndarray:
@@ -124,7 +129,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     n = len(obj)
     rms = [math.sqrt(c[0] / n) for c in candidates]
     ambiguity = rms[1] / max(rms[0], 1e-9) if len(candidates) > 1 else math.inf
-    best, chosen_by, other_probability = 0, 'reprojection', 0.0
+    best, chosen_by, other_probability, barrier = 0, 'reprojection', 0.0, math.inf
     if ambiguity < ambiguity_threshold:
         # A close call: compare the two at their own optimum, then with what
         # is known about the camera. How likely the other one still is
@@ -141,6 +146,8 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         costs = _flip_costs(candidates, rms[0], pixel_sigma, prior, previous=False)
         other_probability = 1.0 / (1.0 + math.exp(float(np.clip(
             0.5 * (costs[1 - best] - costs[best]), -700.0, 700.0))))
+        barrier = _flip_barrier(obj, observed, K, candidates, best,
+                                max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2)
     # (Each candidate carries its projection, made for its residual.) The
     # centres' bias correction depends only weakly on the pose: computed
     # from IPPE's pose it leaves a bias far below the noise after the
@@ -169,6 +176,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         n_points=n,
         chosen_by=chosen_by,
         other_probability=other_probability if other is not None else 0.0,
+        flip_barrier=barrier if other is not None else math.inf,
     )
 
 
@@ -185,6 +193,30 @@ def _flip_costs(candidates, best_rms: float, pixel_sigma: Optional[float],
     sigma2 = max(pixel_sigma or 0.0, best_rms, DEFAULT_MIN_SIGMA_PX) ** 2
     return [c[0] / sigma2 + (prior.penalty(Pose(c[1], c[2]), previous) if prior is not None
                              else 0.0) for c in candidates]
+
+
+def _flip_barrier(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, candidates,
+                  best: int, sigma2: float, steps: int = 8) -> float:
+    """
+    Return how far the cost rises between the chosen planar solution and the other (noise units).
+
+    Along the straight path between them (rotation vector and translation
+    interpolated), ``steps`` points inside. Far away and nearly face on the
+    two can lie in one shallow valley of the reprojection error: its
+    floor, not the noise, then sets how the card is turned, and a pose half
+    a metre off at 5.8 m scored 7 sigmas against its own covariance. A
+    barrier of a few units means the valley, whichever solution is chosen.
+    """
+    (cost_a, R_a, t_a, _), (_, R_b, t_b, _) = candidates[best], candidates[1 - best]
+    turn = rotation_vector(R_b @ R_a.T)
+    highest = cost_a
+    for k in range(1, steps + 1):
+        s = k / (steps + 1.0)
+        R = _f64(rodrigues(s * turn) @ R_a)
+        t = _f64((1.0 - s) * np.asarray(t_a, dtype=float) + s * np.asarray(t_b, dtype=float))
+        projected = project_points(R, t, obj, K)
+        highest = max(highest, float(np.sum((projected - observed) ** 2)))
+    return (highest - cost_a) / sigma2
 
 
 def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,

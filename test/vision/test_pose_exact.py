@@ -182,6 +182,31 @@ def test_a_flip_that_up_decides_is_reported_sure():
     assert est.ambiguity > 2.0 and est.other_probability == 0.0
 
 
+def test_the_flip_barrier_tells_one_valley_from_two_poses():
+    # 2 deg off face on at 6 m the two solutions lie in one shallow valley
+    # of the fit (or are one); 15 deg off, two poses with a ridge between.
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    prior = PosePrior(up_in_camera=np.array([0.0, -1.0, 0.0]))
+
+    def barriers(phi):
+        T = pose_from(6.0, phi, 90.0)
+        out = []
+        for seed in range(60):
+            obs = ellipse_observations(camera, T, np.random.default_rng(seed), 0.08)
+            est = estimate_exact(obs, camera, CFG, prior=PosePrior(up_in_camera=T.R[:, 1]))
+            if est.other_probability > 1e-3:
+                out.append(est.flip_barrier)
+        return np.array(out)
+
+    valley, ridge = barriers(2.0), barriers(15.0)
+    assert len(valley) >= 50 and np.mean(valley < 9.0) > 0.9
+    assert len(ridge) >= 20 and np.all(ridge >= 9.0)
+    # Not a close call: no barrier to speak of.
+    T = pose_from(3.0, 45.0, 30.0)
+    est = estimate_exact(ellipse_observations(camera, T), camera, CFG, prior=prior)
+    assert est.flip_barrier == math.inf
+
+
 def test_other_probability_leaves_the_last_position_to_the_localizer():
     # A last position at the other solution makes the prior choose it; the
     # reported probability is the image's and up's alone, so the solution

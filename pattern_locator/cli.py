@@ -18,6 +18,7 @@ from . import __version__
 from .card.pattern import load_pattern_config
 from .errors import ConfigError, ImageError, PatternLocatorError
 from .localization.gates import GateParameters
+from .localization.localizer import FLIP_VALLEY_BARRIER
 from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
@@ -415,6 +416,7 @@ def card_json(card: LocatedCard) -> dict:
         'ambiguity': None,
         'other_probability': None,
         'other_camera_in_pattern_m': None,
+        'flip_barrier': None,
         'psi_deg': None, 'phi_deg': None, 'theta_deg': None, 'distance_m': None,
     }
     if card.T_camera_pattern is not None:
@@ -433,6 +435,8 @@ def card_json(card: LocatedCard) -> dict:
             out['other_probability'] = float(f'{card.other_probability:.3g}')
             if card.other_probability > 0.0 and card.alternative is not None:
                 out['other_camera_in_pattern_m'] = _rounded(card.alternative.inverse().t, 5)
+            if math.isfinite(card.flip_barrier):
+                out['flip_barrier'] = float(f'{card.flip_barrier:.3g}')
     else:
         out['problem'] = card.problem
     return out
@@ -469,6 +473,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
             print(f'    other planar pose {100.0 * card.other_probability:.2g} % likely: camera '
                   f'at x {x:+.3f} y {y:+.3f} z {z:+.3f} m (the image alone does not decide; on '
                   "a robot, up, the camera's height or the last fix may)")
+            if card.flip_barrier < FLIP_VALLEY_BARRIER:
+                print(f'    both in one shallow valley of the fit (barrier '
+                      f'{card.flip_barrier:.2g}): the turn is less sure than the sd says')
 
 
 # bench and demo ---------------------------------------------------------------------

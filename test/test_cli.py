@@ -202,7 +202,9 @@ def test_detect_reports_the_other_planar_pose_when_the_image_cannot_decide(scene
     # One of the two is the truth; they are apart (a turn about an axis in the card).
     assert min(np.linalg.norm(p - truth) for p in positions) < 0.05 * 5.7
     assert np.linalg.norm(positions[0] - positions[1]) > 0.1
+    assert faceon['flip_barrier'] >= 0.0
     assert one['other_probability'] == 0.0 and one['other_camera_in_pattern_m'] is None
+    assert one['flip_barrier'] is None
     status, out, _ = detect(capsys, paths['faceon.png'], '--camera', paths['camera'])
     assert status == 0 and re.search(r'other planar pose \S+ % likely: camera at x', out), out
 

@@ -121,9 +121,10 @@ class GateParameters:
     # almost as well turned the other way about an axis in its plane. When
     # the other pose is more likely than this (the estimator's
     # other_probability, from the residuals, up and height), a static gate
-    # or the last fix (within partial_code_max_age_s, its jump test's
-    # distances as likelihoods) must bring it below, or the card gives no
-    # fix.
+    # or the last fix (its jump test's distances as likelihoods: they grow
+    # alike as the last fix ages, with odometry's covariance or the speed
+    # limits) must bring it below, or the card gives no fix; never when the
+    # two lie in one shallow valley of the fit (localizer.FLIP_VALLEY_BARRIER).
     max_flip_probability: float = 0.001
 
     def __post_init__(self) -> None:
@@ -418,20 +419,20 @@ class FixGates:
         return None
 
     def distance_from_last(self, T_frame_base: Pose, covariance: np.ndarray, frame_id: str,
-                           stamp_s: Optional[float], odometry: Optional[BaseMotion] = None
-                           ) -> Optional[float]:
+                           stamp_s: Optional[float], odometry: Optional[BaseMotion] = None,
+                           max_age_s: Optional[float] = None) -> Optional[float]:
         """
         Return how far (Mahalanobis) a fix is from where the last fix puts the robot.
 
-        For a partly hidden card's code: None when that cannot be judged (no
-        last fix, no stamp, the continuity gate off) or the last fix is more
-        than ``partial_code_max_age_s`` older. Nothing is counted or
-        remembered.
+        None when that cannot be judged (no last fix, no stamp, the
+        continuity gate off) or the last fix is more than ``max_age_s``
+        older (default ``partial_code_max_age_s``, for a partly hidden
+        card's code). Nothing is counted or remembered.
         """
         fix = self._judged(T_frame_base, covariance, frame_id, stamp_s)
         last = self._accepted
-        if fix is None or last is None or (
-                not fix.stamp - last.stamp <= self.parameters.partial_code_max_age_s):
+        age = self.parameters.partial_code_max_age_s if max_age_s is None else max_age_s
+        if fix is None or last is None or not fix.stamp - last.stamp <= age:
             return None
         return self._distance(last, fix, odometry)
 

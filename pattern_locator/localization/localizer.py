@@ -42,6 +42,13 @@ from ..vision.locate import CardLocator, LocatedCard
 from ..vision.pose_exact import PosePrior
 
 OUTPUT_FRAMES = ('room', 'building')
+# A close planar flip whose fit rises less than this (PoseEstimate.flip_barrier,
+# noise units as other_probability counts them, about half a chi-square) on
+# the way to the other pose lies in one valley: no fix. Synthetic views,
+# 0.08 px of noise: 2-5 deg off face on at 2.5-6 m the median barrier was
+# 0-8 and up to 62 % of the poses more than 4 sigmas off; 10-15 deg off at
+# 4-6 m it was 9 or more in 88-100 % of the unsure draws (two poses).
+FLIP_VALLEY_BARRIER = 9.0
 FUSION_MODES = ('biggest', 'fused')
 
 
@@ -294,20 +301,26 @@ class RobotLocalizer:
         About a horizontal axis the head's "up" and the camera's height tell
         the two apart; about the card's vertical axis nothing the robot
         knows does, and the wrong one, a metre off with a covariance of
-        centimetres, wins often enough to matter. Nearer face on still the
-        two merge into one pose between them, whose tilt the dots' sub-pixel
-        errors set (half a metre off at 5.8 m, four to eight sigmas, as the
-        card's image shifts by fractions of a pixel). So when the other pose
-        is not ruled out by the image and the prior (``other_probability``
-        above ``max_flip_probability``), the fix stands only if a static
-        gate refuses the other pose (outside the room, behind the card, ...)
-        or the last fix makes it that unlikely (the jump test's distances of
-        the two as likelihoods; never when they are one pose). Nothing is
-        counted here.
+        centimetres, wins often enough to matter. Nearer face on the two
+        lie in one shallow valley of the fit, or merge into one pose, whose
+        turn the dots' sub-pixel errors set (half a metre off at 5.8 m,
+        four to eight sigmas, as the card's image shifts by fractions of a
+        pixel). So when the other pose is not ruled out by the image and
+        the prior (``other_probability`` above ``max_flip_probability``):
+        in one valley (``flip_barrier`` below :data:`FLIP_VALLEY_BARRIER`)
+        there is no fix; else the fix stands only if a static gate refuses
+        the other pose (outside the room, behind the card, ...) or the last
+        fix makes it that unlikely (the jump test's distances of the two as
+        likelihoods). Nothing is counted here.
         """
         p = self.gates.parameters
         if located.alternative is None or located.other_probability <= p.max_flip_probability:
             return None
+        if not located.flip_barrier >= FLIP_VALLEY_BARRIER:
+            # One shallow valley: its floor sets the pose, whichever side.
+            return (f'planar flip unsure: the card lies in one shallow valley of the fit with '
+                    f'its other pose (barrier {located.flip_barrier:.2g}; seen this far and '
+                    'this nearly face on, it does not show which way it is turned): no fix')
         other_located = dataclasses.replace(located, T_camera_pattern=located.alternative)
         other, refused = self._fix(det, mapped, other_located, camera, motion, twist,
                                    counted=False)
@@ -315,21 +328,19 @@ class RobotLocalizer:
             return None                         # the other pose is not where a robot can be
         metres = float(np.linalg.norm(other.T_frame_base.t - fix.T_frame_base.t))
         # One leading phrase for every message: the node counts problems by it.
-        if metres < 0.01:
-            chance = ('planar flip unsure: its two poses are one (seen this far and this '
-                      'nearly face on, the card does not show which way it is turned)')
-        else:
-            chance = (f'planar flip unsure: the other pose '
-                      f'{100.0 * located.other_probability:.2g} % likely ({metres:.2f} m away)')
+        chance = (f'planar flip unsure: the other pose {100.0 * located.other_probability:.2g} '
+                  f'% likely ({metres:.2f} m away)')
         if refused is not None:
             return f'{chance}, and its fix has no usable covariance'
+        # Any age: as the last fix ages, odometry's covariance or the speed
+        # limits make the two distances alike, and then they decide nothing.
         chosen = self.gates.distance_from_last(fix.T_frame_base, fix.covariance, fix.frame_id,
-                                               stamp_s, odometry)
+                                               stamp_s, odometry, math.inf)
         rival = self.gates.distance_from_last(other.T_frame_base, other.covariance,
-                                              other.frame_id, stamp_s, odometry)
+                                              other.frame_id, stamp_s, odometry, math.inf)
         if chosen is None:
-            return (f'{chance}, and no recent last fix to choose by: no fix until a view or '
-                    'the last fix decides')
+            return (f'{chance}, and no last fix to choose by: no fix until a view or the '
+                    'last fix decides')
         # Continuity's evidence: the jump test's distances as likelihoods.
         probability = _posterior(located.other_probability, chosen, rival)
         if probability <= p.max_flip_probability:

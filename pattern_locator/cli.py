@@ -17,14 +17,12 @@ import numpy as np
 from . import __version__
 from .card.pattern import load_pattern_config
 from .errors import ConfigError, ImageError, PatternLocatorError
-from .localization.gates import GateParameters
+from .localization.gates import MAX_FLIP_PROBABILITY
 from .localization.localizer import FLIP_VALLEY_BARRIER
 from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
 PROG = 'pattern-locator'
-# detect's text shows the other planar pose above the locator's default flip gate.
-UNSURE_FLIP = GateParameters().max_flip_probability
 DEMO_ROUTES = ('loop', 'tour', 'short', 'paper-stops')
 
 
@@ -468,7 +466,7 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
         if card.ambiguity is not None and math.isfinite(card.ambiguity):
             extra += f'   ambiguity {card.ambiguity:.2f}'
         print(extra)
-        if card.other_probability > UNSURE_FLIP and card.alternative is not None:
+        if card.other_probability > MAX_FLIP_PROBABILITY and card.alternative is not None:
             x, y, z = card.alternative.inverse().t
             print(f'    other planar pose {100.0 * card.other_probability:.2g} % likely: camera '
                   f'at x {x:+.3f} y {y:+.3f} z {z:+.3f} m (the image alone does not decide; on '

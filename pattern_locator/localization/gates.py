@@ -57,6 +57,9 @@ REASONS = (
                                  # neither a gate nor the last fix rules it out
 )
 FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
+# The flip gate's default (GateParameters.max_flip_probability), which the
+# command line, the survey and the benchmark also judge poses by.
+MAX_FLIP_PROBABILITY = 0.001
 # Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.
 ADJACENT_MIN_LENGTH_M = 0.5
 
@@ -125,7 +128,7 @@ class GateParameters:
     # alike as the last fix ages, with odometry's covariance or the speed
     # limits) must bring it below, or the card gives no fix; never when the
     # two lie in one shallow valley of the fit (localizer.FLIP_VALLEY_BARRIER).
-    max_flip_probability: float = 0.001
+    max_flip_probability: float = MAX_FLIP_PROBABILITY
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -25,7 +25,7 @@ from .bagio import BagData, camera_on_base, decode_image, iter_images, Mount
 from .sightings import Sighting
 from ..card.pattern import PatternConfig
 from ..errors import PatternLocatorError
-from ..localization.gates import GateParameters
+from ..localization.gates import MAX_FLIP_PROBABILITY
 from ..vision.camera import CameraModel
 from ..vision.pose_exact import PosePrior
 
@@ -34,9 +34,6 @@ if TYPE_CHECKING:       # the detector's compiled passes load in the workers onl
 
 # Frames in flight per worker: enough to keep the workers busy, few enough to bound memory.
 IN_FLIGHT_PER_JOB = 4
-# A pose whose other planar solution is more likely than the locator's
-# flip gate allows is no sighting (see _detect).
-MAX_FLIP_PROBABILITY = GateParameters().max_flip_probability
 
 
 @dataclass(frozen=True)

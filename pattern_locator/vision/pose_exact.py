@@ -138,16 +138,19 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
                              for _, r, t, _ in candidates), key=lambda sol: sol[0])
         rms = [math.sqrt(c[0] / n) for c in candidates]
         ambiguity = rms[1] / max(rms[0], 1e-9)
-        costs = _flip_costs(candidates, rms[0], pixel_sigma, prior)
-        best = int(np.argmin(costs))
+        noise2 = _flip_noise2(rms[0], pixel_sigma)
+        # Without the last position (the localizer weighs continuity itself)
+        # for the other's probability; with it, for the choice.
+        costs = _flip_costs(candidates, noise2, prior, previous=False)
+        if prior is not None and prior.previous_camera_in_pattern is not None:
+            best = int(np.argmin(_flip_costs(candidates, noise2, prior)))
+        else:
+            best = int(np.argmin(costs))
         if best != 0:
             chosen_by = 'prior'
-        # Without the last position: the localizer weighs continuity itself.
-        costs = _flip_costs(candidates, rms[0], pixel_sigma, prior, previous=False)
         other_probability = 1.0 / (1.0 + math.exp(float(np.clip(
             0.5 * (costs[1 - best] - costs[best]), -700.0, 700.0))))
-        barrier = _flip_barrier(obj, observed, K, candidates, best,
-                                max(pixel_sigma or 0.0, rms[0], DEFAULT_MIN_SIGMA_PX) ** 2)
+        barrier = _flip_barrier(obj, observed, K, candidates, best, noise2)
     # (Each candidate carries its projection, made for its residual.) The
     # centres' bias correction depends only weakly on the pose: computed
     # from IPPE's pose it leaves a bias far below the noise after the
@@ -180,18 +183,22 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     )
 
 
-def _flip_costs(candidates, best_rms: float, pixel_sigma: Optional[float],
-                prior: Optional[PosePrior], previous: bool = True) -> List[float]:
+def _flip_noise2(best_rms: float, pixel_sigma: Optional[float]) -> float:
     """
-    Return each planar solution's cost: its squared residuals over the noise, plus the prior's.
+    Return the pixel variance the two planar solutions' costs are counted in.
 
-    The noise is the better fit's RMS per dot (both image axes together, so
-    twice a coordinate's variance), floored: the image's evidence is
-    counted at about half its weight, which makes the other solution's
-    probability an over-estimate, the safe side for a sure choice.
+    The better fit's RMS per dot (both image axes together, so twice a
+    coordinate's variance), floored: the image's evidence is counted at
+    about half its weight, which makes the other solution's probability an
+    over-estimate, the safe side for a sure choice.
     """
-    sigma2 = max(pixel_sigma or 0.0, best_rms, DEFAULT_MIN_SIGMA_PX) ** 2
-    return [c[0] / sigma2 + (prior.penalty(Pose(c[1], c[2]), previous) if prior is not None
+    return max(pixel_sigma or 0.0, best_rms, DEFAULT_MIN_SIGMA_PX) ** 2
+
+
+def _flip_costs(candidates, noise2: float, prior: Optional[PosePrior],
+                previous: bool = True) -> List[float]:
+    """Return each planar solution's cost: squared residuals over ``noise2``, plus the prior's."""
+    return [c[0] / noise2 + (prior.penalty(Pose(c[1], c[2]), previous) if prior is not None
                              else 0.0) for c in candidates]
 
 

@@ -17,8 +17,7 @@ import numpy as np
 from . import __version__
 from .card.pattern import load_pattern_config
 from .errors import ConfigError, ImageError, PatternLocatorError
-from .localization.gates import MAX_FLIP_PROBABILITY
-from .localization.localizer import FLIP_VALLEY_BARRIER
+from .localization.gates import FLIP_VALLEY_BARRIER, MAX_FLIP_PROBABILITY
 from .vision.image_file import DEFAULT_MAX_PIXELS
 from .vision.locate import CardLocator, ESTIMATORS, LocatedCard
 
@@ -471,9 +470,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
             print(f'    other planar pose {100.0 * card.other_probability:.2g} % likely: camera '
                   f'at x {x:+.3f} y {y:+.3f} z {z:+.3f} m (the image alone does not decide; on '
                   "a robot, up, the camera's height or the last fix may)")
-            if card.flip_barrier < FLIP_VALLEY_BARRIER:
-                print(f'    both in one shallow valley of the fit (barrier '
-                      f'{card.flip_barrier:.2g}): the turn is less sure than the sd says')
+        if card.alternative is not None and card.flip_barrier < FLIP_VALLEY_BARRIER:
+            print(f'    in one shallow valley of the fit with its other planar pose (barrier '
+                  f'{card.flip_barrier:.2g}): the turn is less sure than the sd says')
 
 
 # bench and demo ---------------------------------------------------------------------

@@ -35,7 +35,7 @@ import numpy as np
 from .baselines import make_locator, square_pose_solutions, tag_card_bitmap
 from .demo import PAPER_TABLE1
 from ..card.pattern import Ids, load_pattern_config, PatternConfig
-from ..localization.gates import MAX_FLIP_PROBABILITY
+from ..localization.gates import FLIP_VALLEY_BARRIER, MAX_FLIP_PROBABILITY
 from ..sim.paper_setup import paper_camera
 from ..sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture,
                           Occluder, render_scene, RenderOptions)
@@ -213,7 +213,8 @@ def run_dots(locator: CardLocator, camera: CameraModel, scene: Scene, image: np.
             flipped = _is_flip(est.T_camera_pattern, est.alternative, T, scene.distance)
             if use_prior:
                 out.flipped = flipped
-                out.flip_unsure = est.other_probability > MAX_FLIP_PROBABILITY
+                out.flip_unsure = est.other_probability > MAX_FLIP_PROBABILITY or (
+                    est.alternative is not None and not est.flip_barrier >= FLIP_VALLEY_BARRIER)
             else:
                 out.flipped_without_prior = flipped
         # Dot-centre noise against the true ellipse centres, and the bound for it.
@@ -397,8 +398,9 @@ def quick_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
 def flip_table(results: Dict[str, List[Tuple[Scene, Outcome]]]) -> str:
     lines = ['\n### Planar flips (the chosen solution > 5 % of D off, the other one at most '
              'half as far), with and without the up prior; dots: poses whose other '
-             f'solution is > {MAX_FLIP_PROBABILITY:g} likely (unsure: the locator takes '
-             'them only when a gate or its last fix decides), and flips among them',
+             f'solution is > {MAX_FLIP_PROBABILITY:g} likely or in one shallow valley of the '
+             'fit with it (unsure: the locator takes the first only when a gate or its last '
+             'fix decides, the second never), and flips among them',
              f'{"marker":<9}{"bin (m)":<10}{"found":>6}{"with prior":>11}{"without":>9}'
              f'{"unsure":>8}{"unsure flips":>14}']
     for m in MARKERS:

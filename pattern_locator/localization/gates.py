@@ -60,6 +60,16 @@ FOOTPRINTS = ('room', 'adjacent', 'building', 'off')
 # The flip gate's default (GateParameters.max_flip_probability), which the
 # command line, the survey and the benchmark also judge poses by.
 MAX_FLIP_PROBABILITY = 0.001
+# A close planar flip whose fit rises less than this (PoseEstimate.flip_barrier,
+# noise units as other_probability counts them, about half a chi-square) on
+# the way to the other pose lies in one valley: no fix, whatever decided the
+# side. Synthetic views, 0.08 px of noise: 2-5 deg off face on at 2.5-6 m the
+# median barrier was 0-8 and up to 62 % of the poses more than 4 sigmas off;
+# 10-15 deg off at 4-6 m it was 9 or more in 88-100 % of the unsure draws
+# (two poses). With the side decided by up and height (card 1 m above the
+# camera, 6-8 m away), 17 of the 19 poses more than 4 sigmas off of 200 lay
+# in the valley.
+FLIP_VALLEY_BARRIER = 9.0
 # Rooms next to each other (footprint mode 'adjacent') run side by side this far at least.
 ADJACENT_MIN_LENGTH_M = 0.5
 
@@ -126,8 +136,9 @@ class GateParameters:
     # other_probability, from the residuals, up and height), a static gate
     # or the last fix (its jump test's distances as likelihoods: they grow
     # alike as the last fix ages, with odometry's covariance or the speed
-    # limits) must bring it below, or the card gives no fix; never when the
-    # two lie in one shallow valley of the fit (localizer.FLIP_VALLEY_BARRIER).
+    # limits) must bring it below, or the card gives no fix. When the two lie
+    # in one shallow valley of the fit (FLIP_VALLEY_BARRIER) there is no fix
+    # at all, however sure the side.
     max_flip_probability: float = MAX_FLIP_PROBABILITY
 
     def __post_init__(self) -> None:

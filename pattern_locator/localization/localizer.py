@@ -29,7 +29,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .building import BuildingMap, MappedCard
-from .gates import BaseMotion, FixGates, GateParameters, Rejection
+from .gates import BaseMotion, FixGates, FLIP_VALLEY_BARRIER, GateParameters, Rejection
 from .head import base_pose_from_camera, covariance_to_base, HeadGeometry, HeadMotion, up_in_camera
 from .odom import BaseTwist
 from .uncertainty import fix_covariance, FixCovariance, UncertaintyParameters
@@ -42,13 +42,6 @@ from ..vision.locate import CardLocator, LocatedCard
 from ..vision.pose_exact import PosePrior
 
 OUTPUT_FRAMES = ('room', 'building')
-# A close planar flip whose fit rises less than this (PoseEstimate.flip_barrier,
-# noise units as other_probability counts them, about half a chi-square) on
-# the way to the other pose lies in one valley: no fix. Synthetic views,
-# 0.08 px of noise: 2-5 deg off face on at 2.5-6 m the median barrier was
-# 0-8 and up to 62 % of the poses more than 4 sigmas off; 10-15 deg off at
-# 4-6 m it was 9 or more in 88-100 % of the unsure draws (two poses).
-FLIP_VALLEY_BARRIER = 9.0
 FUSION_MODES = ('biggest', 'fused')
 
 
@@ -305,23 +298,30 @@ class RobotLocalizer:
         lie in one shallow valley of the fit, or merge into one pose, whose
         turn the dots' sub-pixel errors set (half a metre off at 5.8 m,
         four to eight sigmas, as the card's image shifts by fractions of a
-        pixel). So when the other pose is not ruled out by the image and
-        the prior (``other_probability`` above ``max_flip_probability``):
-        in one valley (``flip_barrier`` below :data:`FLIP_VALLEY_BARRIER`)
-        there is no fix; else the fix stands only if a static gate refuses
-        the other pose (outside the room, behind the card, ...) or the last
-        fix makes it that unlikely (the jump test's distances of the two as
-        likelihoods). Nothing is counted here.
+        pixel). So in one valley (``flip_barrier`` below
+        :data:`FLIP_VALLEY_BARRIER`) there is no fix, even where up and
+        height choose the side: the valley runs on around the card's normal
+        too, where neither tells anything (a card 1 m above the camera, 8 m
+        away: poses a metre off sideways at 4-9 sigmas). Else, when the
+        other pose is not ruled out by the image and the prior
+        (``other_probability`` above ``max_flip_probability``), the fix
+        stands only if a static gate refuses the other pose (outside the
+        room, behind the card, ...) or the last fix makes it that unlikely
+        (the jump test's distances of the two as likelihoods). Nothing is
+        counted here.
         """
         p = self.gates.parameters
-        if located.alternative is None or located.other_probability <= p.max_flip_probability:
+        if located.alternative is None:
             return None
         if not located.flip_barrier >= FLIP_VALLEY_BARRIER:
             # One shallow valley: its floor sets the pose, whichever side.
             return (f'planar flip unsure: the card lies in one shallow valley of the fit with '
                     f'its other pose (barrier {located.flip_barrier:.2g}; seen this far and '
                     'this nearly face on, it does not show which way it is turned): no fix')
-        other_located = dataclasses.replace(located, T_camera_pattern=located.alternative)
+        if located.other_probability <= p.max_flip_probability:
+            return None
+        other_located = dataclasses.replace(located, T_camera_pattern=located.alternative,
+                                            prior_information=None)
         other, refused = self._fix(det, mapped, other_located, camera, motion, twist,
                                    counted=False)
         if refused is not None and refused.reason not in ('not_finite', 'covariance'):
@@ -396,7 +396,7 @@ class RobotLocalizer:
                     terms = fix_covariance(self.uncertainty, camera, self._model_points, seen,
                                            located.reprojection_rms_px, T_camera_card,
                                            T_frame_card, T_frame_base, mapped, self.head,
-                                           motion, twist)
+                                           motion, twist, located.prior_information)
                     covariance = terms.total
                 except (ValueError, np.linalg.LinAlgError):
                     covariance = None      # the covariance gate says so

@@ -191,7 +191,8 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
                    model_points: np.ndarray, seen: np.ndarray, reprojection_rms_px: float,
                    T_camera_card: Pose, T_frame_card: Pose, T_frame_base: Pose, card,
                    head: HeadGeometry, motion: HeadMotion,
-                   twist: Optional[BaseTwist] = None) -> FixCovariance:
+                   twist: Optional[BaseTwist] = None,
+                   prior_information: Optional[np.ndarray] = None) -> FixCovariance:
     """
     Return a fix's covariance, term by term (module docstring), in the frame of ``T_frame_card``.
 
@@ -200,7 +201,9 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
     residual; ``T_camera_card``: the estimated pose; ``T_frame_card`` and
     ``T_frame_base``: the card and the base in the output frame; ``card``:
     the map's card (for ``std_dev``); ``motion``: the head's angles and
-    rates at the stamp; ``twist``: the base's (None: standing).
+    rates at the stamp; ``twist``: the base's (None: standing);
+    ``prior_information``: what up and height added to the pose's fit
+    (``PoseEstimate.prior_information``), in its image term.
     """
     p = parameters
     seen = np.asarray(seen, dtype=bool)
@@ -211,7 +214,7 @@ def fix_covariance(parameters: UncertaintyParameters, camera: CameraModel,
                              p.exposure_s + p.field_period_s)
     sigma_px = math.sqrt(max(p.residual_factor * residual_sigma, p.pixel_sigma_px, 1e-6) ** 2
                          + (p.blur_sigma_per_px * blur) ** 2)
-    cov_camera = pose_covariance(T_camera_card, obj, camera.K, sigma_px)
+    cov_camera = pose_covariance(T_camera_card, obj, camera.K, sigma_px, prior_information)
     pan, tilt = motion.pan, motion.tilt
     terms: Dict[str, np.ndarray] = {}
     terms['image'] = covariance_to_base(cov_camera, T_frame_card, T_camera_card, head, pan, tilt)

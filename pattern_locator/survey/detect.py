@@ -7,7 +7,8 @@ Detection is the survey's cost and is independent per frame, so frames go to
 worker decodes the image, runs the same locator as the node
 (``CardLocator``, exact estimator: pose and Fisher covariance) and returns
 small :class:`~.sightings.Sighting` values, less the poses whose other
-planar solution is as likely as the locator's flip gate allows (counted in
+planar solution is more likely than the locator's flip gate allows, or lies
+in one shallow valley of the fit with it (counted in
 ``DetectionStats.unsure_flips``). With ``jobs == 1`` everything runs in this
 process.
 """
@@ -25,7 +26,7 @@ from .bagio import BagData, camera_on_base, decode_image, iter_images, Mount
 from .sightings import Sighting
 from ..card.pattern import PatternConfig
 from ..errors import PatternLocatorError
-from ..localization.gates import MAX_FLIP_PROBABILITY
+from ..localization.gates import FLIP_VALLEY_BARRIER, MAX_FLIP_PROBABILITY
 from ..vision.camera import CameraModel
 from ..vision.pose_exact import PosePrior
 
@@ -69,8 +70,10 @@ def sightings_of(located: Sequence['LocatedCard'], bag: int, frame: int, stamp: 
 
     A card with no pose or a non-finite covariance is no sighting; nor is
     one whose other planar pose is more likely than the locator's flip gate
-    allows: its covariance does not know that pose, a metre off at 6 m, and
-    one such sighting, or several at the fold, would pull the card's place.
+    allows, or lies in one shallow valley of the fit with it (as the
+    locator's flip gate): its covariance does not know that pose, a metre off
+    at 6 m, and one such sighting, or several at the fold, would pull the
+    card's place.
     """
     out: List[Sighting] = []
     unsure = 0
@@ -79,7 +82,8 @@ def sightings_of(located: Sequence['LocatedCard'], bag: int, frame: int, stamp: 
             continue
         if not np.all(np.isfinite(card.covariance)):
             continue
-        if card.other_probability > MAX_FLIP_PROBABILITY:
+        if card.other_probability > MAX_FLIP_PROBABILITY or not (
+                card.flip_barrier >= FLIP_VALLEY_BARRIER):
             unsure += 1
             continue
         det = card.detection

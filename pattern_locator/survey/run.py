@@ -141,8 +141,8 @@ def _notes(run: SurveyRun, bag_paths: Sequence[str], rooms) -> Tuple[List[str], 
                   f'{stats.frames_with_cards} frames, {stats.wall_s:.1f} s on {stats.jobs} '
                   f'process(es)' + (f'; {stats.bad_frames} frames unusable '
                                     f'({stats.first_problem})' if stats.bad_frames else '')
-                  + (f'; {stats.unsure_flips} poses left out, their planar flip unsure'
-                     if stats.unsure_flips else ''))
+                  + (f'; {stats.unsure_flips} poses left out, their planar flip unsure or '
+                     'in one valley' if stats.unsure_flips else ''))
     header.append(f'optimisation: {result.frames} keyframes, {result.used_sightings} '
                   f'sightings used, {result.outliers} dropped as outliers, '
                   f'{result.rounds} rounds, {run.optimise_cpu_s:.1f} s CPU')

@@ -303,6 +303,35 @@ def refine_pose(obj, img, K, R, t):
     detector asked of OpenCV). Returns ``(R, t)``; the input when no step
     lowers the error.
     """
+    return refine_pose_prior(obj, img, K, R, t, 1.0, np.zeros(3), 0.0, 0.0, 0.0)
+
+
+@_kernel
+def _prior_cost(R, t, up, up_weight, height, height_weight):
+    """Sum the prior's squared residuals: up (chord of R's column 1 to ``up``), camera height."""
+    total = 0.0
+    if up_weight > 0.0:
+        for k in range(3):
+            d = (R[k, 1] - up[k]) * up_weight
+            total += d * d
+    if height_weight > 0.0:
+        d = (-(R[0, 1] * t[0] + R[1, 1] * t[1] + R[2, 1] * t[2]) - height) * height_weight
+        total += d * d
+    return total
+
+
+@_kernel
+def refine_pose_prior(obj, img, K, R, t, pixel_weight, up, up_weight, height, height_weight):
+    """
+    :func:`refine_pose` on the reprojection error plus what is known of the camera: the MAP pose.
+
+    The image's residuals count in units of the pixel noise (``pixel_weight``
+    = 1 / sigma); ``up`` (a unit vector in the camera frame) is where the
+    pattern's +y should point, ``up_weight`` = 1 / its sigma (radians; 0: not
+    known); ``height`` the camera's y in the pattern frame, ``height_weight``
+    = 1 / its sigma (metres; 0: not known). With both weights 0 and
+    ``pixel_weight`` 1 it is :func:`refine_pose`, to the bit.
+    """
     n = obj.shape[0]
     R = R.copy()
     t = t.copy()
@@ -310,7 +339,9 @@ def refine_pose(obj, img, K, R, t):
     Jtr = np.empty(6)
     jrow = np.empty(6)
     lam = 1e-3
-    cost = _pose_cost(obj, img, K, R, t)
+    pw2 = pixel_weight * pixel_weight
+    cost = pw2 * _pose_cost(obj, img, K, R, t) + _prior_cost(
+        R, t, up, up_weight, height, height_weight)
     if not cost < np.inf:
         return R, t
     for _ in range(20):
@@ -337,7 +368,33 @@ def refine_pose(obj, img, K, R, t):
                 jrow[1] = d0 * rz + d2 * (-rx)
                 jrow[2] = d0 * (-ry) + d1 * rx
                 jrow[3], jrow[4], jrow[5] = d0, d1, d2
-                _accumulate(JtJ, Jtr, jrow, res)
+                for k in range(6):
+                    jrow[k] *= pixel_weight
+                _accumulate(JtJ, Jtr, jrow, res * pixel_weight)
+        if up_weight > 0.0:
+            # The pattern's +y in the camera, s = R e_y: a turn w moves it by w x s.
+            s0, s1, s2 = R[0, 1], R[1, 1], R[2, 1]
+            for k in range(3):
+                jrow[3], jrow[4], jrow[5] = 0.0, 0.0, 0.0
+                if k == 0:
+                    jrow[0], jrow[1], jrow[2] = 0.0, s2, -s1
+                elif k == 1:
+                    jrow[0], jrow[1], jrow[2] = -s2, 0.0, s0
+                else:
+                    jrow[0], jrow[1], jrow[2] = s1, -s0, 0.0
+                for a in range(3):
+                    jrow[a] *= up_weight
+                _accumulate(JtJ, Jtr, jrow, (R[k, 1] - up[k]) * up_weight)
+        if height_weight > 0.0:
+            # The camera's height c_y = -s . t: d/dw = -(s x t), d/dt = -s.
+            s0, s1, s2 = R[0, 1], R[1, 1], R[2, 1]
+            jrow[0] = -(s1 * t[2] - s2 * t[1]) * height_weight
+            jrow[1] = -(s2 * t[0] - s0 * t[2]) * height_weight
+            jrow[2] = -(s0 * t[1] - s1 * t[0]) * height_weight
+            jrow[3], jrow[4], jrow[5] = -s0 * height_weight, -s1 * height_weight, \
+                -s2 * height_weight
+            _accumulate(JtJ, Jtr, jrow,
+                        (-(s0 * t[0] + s1 * t[1] + s2 * t[2]) - height) * height_weight)
         improved = False
         for _ in range(8):
             solved, step = _damped_step(JtJ, Jtr, lam)
@@ -347,7 +404,8 @@ def refine_pose(obj, img, K, R, t):
             t_trial = np.empty(3)
             for k in range(3):
                 t_trial[k] = t[k] - step[3 + k]
-            trial_cost = _pose_cost(obj, img, K, R_trial, t_trial)
+            trial_cost = pw2 * _pose_cost(obj, img, K, R_trial, t_trial) + _prior_cost(
+                R_trial, t_trial, up, up_weight, height, height_weight)
             if trial_cost < cost:
                 done = cost - trial_cost <= 1e-15 * max(cost, 1e-30) \
                     or _norm(step) <= 1e-12 * (1.0 + _norm(t))
@@ -598,8 +656,8 @@ def refine_exact(obj, observed, K, R, t, projected, radii, bias_correction, min_
     ``projected`` points), the Levenberg-Marquardt refinement
     (:func:`refine_pose`), each dot's residual, and the dots more than
     ``min_outlier`` pixels and ``outlier_factor`` times the median residual
-    off. Returns ``(R, t, residual, outliers, sum of squared residuals)``,
-    the sum in numpy's order.
+    off. Returns ``(R, t, residual, outliers, sum of squared residuals,
+    the corrected centres)``, the sum in numpy's order.
     """
     n = obj.shape[0]
     corrected = observed
@@ -621,7 +679,7 @@ def refine_exact(obj, observed, K, R, t, projected, radii, bias_correction, min_
     for i in range(n):
         outliers[i] = residual[i] > limit
         squares[i] = residual[i] ** 2
-    return R, t, residual, outliers, _pairwise_sum(squares, n)
+    return R, t, residual, outliers, _pairwise_sum(squares, n), corrected
 
 
 @_kernel
@@ -691,6 +749,8 @@ def warm_up() -> None:
     plane = np.column_stack([square, np.zeros(len(square))])
     K, R, t = np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0])
     refine_pose(plane, square * 100.0, K, R, t)
+    refine_pose_prior(plane, square * 100.0, K, R, t, 2.0, np.array([0.0, 1.0, 0.0]), 10.0,
+                      0.0, 5.0)
     project_points(R, t, plane, K)
     planar_poses(plane, square * 100.0, K)
     circle_image_centres(R, t, square, np.ones(len(square)), K)

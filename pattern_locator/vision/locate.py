@@ -41,6 +41,8 @@ class LocatedCard:
     alternative: Optional[Pose] = None
     other_probability: float = 0.0
     flip_barrier: float = math.inf
+    # The prior's up and height in the fit (PoseEstimate.prior_information).
+    prior_information: Optional[np.ndarray] = None
 
     @property
     def camera_in_pattern(self) -> Optional[np.ndarray]:
@@ -105,7 +107,8 @@ class CardLocator:
                            est.ambiguity, psi, phi, theta, distance, 'exact',
                            alternative=est.alternative,
                            other_probability=est.other_probability,
-                           flip_barrier=est.flip_barrier)
+                           flip_barrier=est.flip_barrier,
+                           prior_information=est.prior_information)
 
     def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
         from .pose_paper import estimate_paper

@@ -27,8 +27,8 @@ import numpy as np
 
 from .camera import CameraModel
 from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
-                          point_residuals, pose_covariance_matrix, project_points,
-                          refine_exact, refine_pose)
+                          point_residuals, pose_covariance_matrix, pose_jacobian,
+                          project_points, refine_exact, refine_pose, refine_pose_prior)
 from .geometry import Pose, rodrigues, rotation_vector
 from .per_config import made_once
 from ..card.pattern import PatternConfig
@@ -38,6 +38,7 @@ MIN_POINTS = 6
 DEFAULT_MIN_SIGMA_PX = 0.05   # floor of the pixel noise used for the covariance
 MIN_OUTLIER_PX = 0.2          # a dot this far off the fit (and OUTLIER_FACTOR times the
 OUTLIER_FACTOR = 5.0          # median residual) is dropped
+_MAP_ALWAYS = False
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,40 @@ class PosePrior:
             total += (d / self.previous_sigma) ** 2
         return total
 
+    @property
+    def fits(self) -> bool:
+        """Whether the prior has a term the pose's fit can use (up or height)."""
+        return self.up_in_camera is not None or self.camera_height is not None
+
+    def fit_terms(self) -> Tuple[np.ndarray, float, float, float]:
+        """Return up (unit, camera frame), 1/its sigma, the height and 1/its sigma (0: none)."""
+        up, up_weight = np.zeros(3), 0.0
+        if self.up_in_camera is not None:
+            up = np.asarray(self.up_in_camera, dtype=float)
+            up, up_weight = up / np.linalg.norm(up), 1.0 / self.up_sigma_rad
+        height, height_weight = 0.0, 0.0
+        if self.camera_height is not None:
+            height, height_weight = float(self.camera_height), 1.0 / self.height_sigma
+        return up, up_weight, height, height_weight
+
+    def information(self, T_camera_pattern: Pose) -> np.ndarray:
+        """
+        Return the 6x6 information the up and height terms add to a pose (no last position).
+
+        In :func:`pose_covariance`'s parameters (camera position, rotation
+        about the pattern's axes), at ``T_camera_pattern``. A turn dtheta
+        moves the pattern's +y in the camera by R (e_y x dtheta); the
+        height is the position's y.
+        """
+        _, up_weight, _, height_weight = self.fit_terms()
+        info = np.zeros((6, 6))
+        info[1, 1] = height_weight ** 2
+        if up_weight > 0.0:
+            J = up_weight * T_camera_pattern.R @ np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0],
+                                                           [-1.0, 0.0, 0.0]])
+            info[3:, 3:] = J.T @ J
+        return info
+
 
 @dataclass(frozen=True)
 class PoseEstimate:
@@ -99,6 +134,9 @@ class PoseEstimate:
     # flat valley (near face on and far), where the chosen pose's own
     # covariance does not hold (_flip_barrier). inf when not a close call.
     flip_barrier: float = math.inf
+    # What the prior's up and height added to the fit (PosePrior.information,
+    # in the covariance's parameters), None when the fit is the image's alone.
+    prior_information: Optional[np.ndarray] = None
 
     @property
     def camera_in_pattern(self) -> np.ndarray:
@@ -158,7 +196,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     # neighbour keeps a centre far off the others' fit: drop it and solve
     # again. (fit_kernels.refine_exact.)
     _, R, t, projected = candidates[best]
-    R, t, residual, outliers, ss = refine_exact(
+    R, t, residual, outliers, ss, corrected = refine_exact(
         obj, _f64(observed), K, _f64(R), _f64(t), _f64(projected), _f64(radii),
         bool(bias_correction), MIN_OUTLIER_PX, OUTLIER_FACTOR)
     dropped = int(np.count_nonzero(outliers))
@@ -167,12 +205,25 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         cleaned[np.flatnonzero(seen)[outliers]] = np.nan
         return estimate_exact(cleaned, camera, config, prior, pixel_sigma, bias_correction,
                               ambiguity_threshold)
-    pose = Pose(R, t)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
+    prior_information = None
+    if prior is not None and prior.fits and (_MAP_ALWAYS or math.isfinite(barrier)):
+        # A close call: far and nearly face on, the image alone leaves the
+        # card's turn in a shallow valley, where the dots' sub-pixel errors
+        # set it (_flip_barrier). What is known of up and height then holds
+        # the pose: the fit is the MAP pose of the image and those two, and
+        # its covariance theirs together. (Elsewhere the image alone pins
+        # the turn far tighter than a few degrees of up.)
+        up, up_weight, height, height_weight = prior.fit_terms()
+        R, t = refine_pose_prior(obj, corrected, K, R, t, 1.0 / sigma, _f64(up), up_weight,
+                                 height, height_weight)
+        ss = float(np.sum(point_residuals(R, t, obj, corrected, K) ** 2))
+        prior_information = prior.information(Pose(R, t))
+    pose = Pose(R, t)
     return PoseEstimate(
         T_camera_pattern=pose,
-        covariance=pose_covariance(pose, obj, K, sigma),
+        covariance=pose_covariance(pose, obj, K, sigma, prior_information),
         reprojection_rms_px=math.sqrt(ss / n),
         ambiguity=(rms[1 - best] / max(rms[best], 1e-9)) if other is not None else math.inf,
         alternative=Pose(other[1], other[2]) if other is not None else None,
@@ -180,6 +231,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         chosen_by=chosen_by,
         other_probability=other_probability if other is not None else 0.0,
         flip_barrier=barrier if other is not None else math.inf,
+        prior_information=prior_information,
     )
 
 
@@ -250,17 +302,27 @@ def covariance_of_pose(T_camera_pattern: Pose, points_px: np.ndarray, camera: Ca
 
 
 def pose_covariance(T_camera_pattern: Pose, object_points: np.ndarray, K: np.ndarray,
-                    sigma_px: float) -> np.ndarray:
+                    sigma_px: float, prior_information: Optional[np.ndarray] = None
+                    ) -> np.ndarray:
     """
     ``sigma^2 (J^T J)^-1`` for the camera pose in the pattern frame.
 
     Parameters: camera position (x, y, z, metres) and a small rotation of the
     camera about the pattern frame's axes (radians), the form
     PoseWithCovariance uses. With the true pose and the true pixel noise this
-    is the Cramer-Rao bound of any unbiased estimator.
+    is the Cramer-Rao bound of any unbiased estimator. With
+    ``prior_information`` (:meth:`PosePrior.information`) it is the MAP
+    pose's: ``(J^T J / sigma^2 + prior_information)^-1``.
     """
-    return pose_covariance_matrix(_f64(T_camera_pattern.R), _f64(T_camera_pattern.t),
-                                  _f64(object_points), _f64(K), float(sigma_px))
+    R, t, obj = _f64(T_camera_pattern.R), _f64(T_camera_pattern.t), _f64(object_points)
+    if prior_information is None:
+        return pose_covariance_matrix(R, t, obj, _f64(K), float(sigma_px))
+    J = pose_jacobian(R, t, obj, _f64(K))
+    info = J.T @ J / float(sigma_px) ** 2 + prior_information
+    try:
+        return np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.inf)
 
 
 def ellipse_centres(T_camera_pattern: Pose, centres_xy: np.ndarray, radii: np.ndarray,

@@ -218,7 +218,8 @@ def test_one_compiled_signature_per_kernel_after_detections():
                spot_kernels.paper_noise, fit_kernels.fit_homography_points,
                fit_kernels.fit_homography_inliers, fit_kernels.planar_poses,
                fit_kernels.refine_exact, spot_kernels.measure,
-               fit_kernels.refine_pose, fit_kernels.project_points,
+               fit_kernels.refine_pose, fit_kernels.refine_pose_prior,
+               fit_kernels.project_points,
                fit_kernels.circle_image_centres, fit_kernels.pose_jacobian,
                fit_kernels.point_residuals, fit_kernels.pose_covariance_matrix,
                fit_kernels.circle_axis_angle]

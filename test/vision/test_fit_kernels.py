@@ -244,10 +244,11 @@ def test_refine_exact_is_its_numpy_steps():
         if rng.random() < 0.3:
             img[int(rng.integers(0, 17))] += rng.normal(0.0, 8.0, 2)    # a dot off the fit
         _, Rs, ts, _, projected = planar_poses(obj, img, K)
-        R, t, residual, outliers, ss = refine_exact(obj, img, K, Rs[0], ts[0], projected[0],
-                                                    radii, True, 0.2, 5.0)
+        R, t, residual, outliers, ss, used = refine_exact(obj, img, K, Rs[0], ts[0],
+                                                          projected[0], radii, True, 0.2, 5.0)
         corrected = img - (circle_image_centres(Rs[0], ts[0], obj[:, :2].copy(), radii, K)
                            - projected[0])
+        assert np.array_equal(used, corrected)
         R_np, t_np = refine_pose(obj, corrected, K, Rs[0], ts[0])
         res_np = point_residuals(R_np, t_np, obj, corrected, K)
         median = float(np.partition(res_np, 8)[8])
@@ -300,3 +301,39 @@ def test_homography_rounds_drop_the_points_off_the_fit_as_one_step_at_a_time():
             dropped += int(not inliers.all())
         refused += int(not ok)
     assert dropped > 50 and refused > 10
+
+
+def test_the_prior_refinement_finds_the_map_pose():
+    from pattern_locator.vision.fit_kernels import (_pose_cost, _prior_cost, refine_pose,
+                                                    refine_pose_prior)
+
+    rng = np.random.default_rng(17)
+    obj = PatternConfig().model_points().astype(float)
+    K = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
+    sigma, up_sigma, height_sigma = 0.3, np.radians(5.0), 0.1
+
+    def total(R, t, up, height):
+        return _pose_cost(obj, img, K, R, t) / sigma ** 2 + _prior_cost(
+            R, t, up, 1.0 / up_sigma, height, 1.0 / height_sigma)
+
+    for _ in range(100):
+        R0 = cv2.Rodrigues(rng.normal(0.0, 0.3, 3))[0]
+        t0 = np.array([rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(1.5, 8.0)])
+        img = fit_kernels.project_points(R0, t0, obj, K) + rng.normal(0.0, sigma, (17, 2))
+        up = R0[:, 1] + rng.normal(0.0, 0.05, 3)
+        up /= np.linalg.norm(up)
+        height = float(-(R0.T @ t0)[1]) + rng.normal(0.0, 0.2)
+        # Weights 0 and 1: the image's refinement, to the bit.
+        R_img, t_img = refine_pose(obj, img, K, R0, t0)
+        R_same, t_same = refine_pose_prior(obj, img, K, R0, t0, 1.0, np.zeros(3), 0.0, 0.0, 0.0)
+        assert np.array_equal(R_img, R_same) and np.array_equal(t_img, t_same)
+        # With up and height, a minimum of the sum: no small step lowers it,
+        # and it is no higher than the image's own optimum.
+        R, t = refine_pose_prior(obj, img, K, R_img, t_img, 1.0 / sigma, up, 1.0 / up_sigma,
+                                 height, 1.0 / height_sigma)
+        best = total(R, t, up, height)
+        assert best <= total(R_img, t_img, up, height) + 1e-9
+        for _ in range(12):
+            step = rng.normal(0.0, 1.0, 6) * np.array([1e-3] * 3 + [1e-3] * 3)
+            R_near = cv2.Rodrigues(step[:3])[0] @ R
+            assert total(R_near, t + step[3:], up, height) >= best - 1e-7 * max(best, 1.0)

@@ -223,6 +223,72 @@ def test_other_probability_leaves_the_last_position_to_the_localizer():
     assert swayed.other_probability == pytest.approx(1.0 - alone.other_probability, abs=1e-6)
 
 
+def test_the_prior_information_is_its_terms_linearised():
+    # PosePrior.information against finite differences of the up and height
+    # residuals, in pose_covariance's parameters (camera position, turn of
+    # the camera about the pattern's axes: R' = R (I - [dtheta]x)).
+    from pattern_locator.vision.geometry import rodrigues
+    T = pose_from(4.0, 25.0, 130.0, roll_deg=10.0)
+    prior = PosePrior(up_in_camera=np.array([0.1, -1.0, 0.05]), up_sigma_rad=0.07,
+                      camera_height=0.3, height_sigma=0.2)
+    up, up_weight, height, height_weight = prior.fit_terms()
+
+    def residuals(delta):
+        R = T.R @ rodrigues(-delta[3:])
+        c = T.inverse().t + delta[:3]
+        return np.concatenate([(R[:, 1] - up) * up_weight, [(c[1] - height) * height_weight]])
+
+    h = 1e-6
+    J = np.column_stack([(residuals(h * e) - residuals(-h * e)) / (2 * h) for e in np.eye(6)])
+    assert np.allclose(prior.information(T), J.T @ J, rtol=1e-5, atol=1e-6)
+    assert not PosePrior(previous_camera_in_pattern=np.zeros(3)).fits
+
+
+def test_up_and_height_hold_a_far_pose_in_the_valley(monkeypatch):
+    # A card 1 m above the camera, 8 m away (7.5 deg off its normal), a wide
+    # lens: the image alone leaves the card's turn in a shallow valley, up
+    # and height (as a robot knows them, a few degrees and centimetres off)
+    # take part in the fit, and its covariance is theirs together.
+    camera = CameraModel.from_focal(640, 480, 554.0)
+    T = pose_from(8.0, 7.5, 180.0)
+    truth = T.inverse().t
+
+    def errors():
+        out = []
+        for seed in range(80):
+            rng = np.random.default_rng(seed)
+            prior = PosePrior(up_in_camera=T.R[:, 1] + rng.normal(0.0, math.radians(2.0), 3),
+                              up_sigma_rad=math.radians(5.0),
+                              camera_height=truth[1] + rng.normal(0.0, 0.05), height_sigma=0.15)
+            est = estimate_exact(ellipse_observations(camera, T, rng, 0.08), camera, CFG,
+                                 prior=prior)
+            out.append((float(np.linalg.norm(est.camera_in_pattern - truth)), est, prior))
+        return out
+
+    with_prior = errors()
+    for _, est, prior in with_prior:
+        # The information is the image's (some pixel sigma) plus the prior's.
+        assert est.prior_information is not None
+        image = np.linalg.inv(est.covariance) - est.prior_information
+        unit = np.linalg.inv(pose_covariance(est.T_camera_pattern, CFG.model_points(),
+                                             camera.K, 1.0))
+        scale = image[0, 0] / unit[0, 0]
+        assert np.allclose(image, scale * unit, rtol=1e-6, atol=1e-6 * np.abs(image).max())
+        assert 0.05 - 1e-9 <= scale ** -0.5 <= 0.15      # floored at 0.05 px
+        assert math.sqrt(est.covariance[1, 1]) < prior.height_sigma
+    with monkeypatch.context() as patched:
+        patched.setattr(PosePrior, 'fits', property(lambda self: False))
+        image_only = errors()
+    assert all(est.prior_information is None for _, est, _ in image_only)
+    median_with = np.median([e for e, _, _ in with_prior])
+    median_without = np.median([e for e, _, _ in image_only])
+    assert median_with < 0.75 * median_without, (median_with, median_without)
+    # Not a close call, the image's fit alone.
+    near = estimate_exact(ellipse_observations(camera, pose_from(2.0, 40.0, 30.0)), camera,
+                          CFG, prior=PosePrior(up_in_camera=T.R[:, 1], camera_height=0.0))
+    assert near.prior_information is None
+
+
 def test_wrong_shape_is_an_estimation_error():
     camera = CameraModel.from_focal(640, 480, 1000.0)
     with pytest.raises(EstimationError, match='expected 17 dot positions'):

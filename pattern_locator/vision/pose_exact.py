@@ -38,7 +38,6 @@ MIN_POINTS = 6
 DEFAULT_MIN_SIGMA_PX = 0.05   # floor of the pixel noise used for the covariance
 MIN_OUTLIER_PX = 0.2          # a dot this far off the fit (and OUTLIER_FACTOR times the
 OUTLIER_FACTOR = 5.0          # median residual) is dropped
-_MAP_ALWAYS = False
 
 
 @dataclass(frozen=True)
@@ -208,7 +207,7 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
     prior_information = None
-    if prior is not None and prior.fits and (_MAP_ALWAYS or math.isfinite(barrier)):
+    if prior is not None and prior.fits and math.isfinite(barrier):
         # A close call: far and nearly face on, the image alone leaves the
         # card's turn in a shallow valley, where the dots' sub-pixel errors
         # set it (_flip_barrier). What is known of up and height then holds

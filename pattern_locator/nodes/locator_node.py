@@ -33,6 +33,15 @@ Publishes
     ``pattern_locator/debug_image`` (only drawn while someone subscribes) and
     ``/diagnostics``.
 
+Services
+    ``~/reset`` (std_srvs/Trigger): forget the last fix, the pose carried
+    forward by odometry and the gaze's card, for a robot carried elsewhere
+    (else ``odom_bridged`` keeps publishing the old place, and the gaze
+    looks for the cards near it, until a new fix): the next fix is judged
+    as a first one (held back until a second image agrees, while
+    ``gates.confirm_first_fix``), with no last fix to decide a planar flip
+    or a partly hidden card's code.
+
 Parameters: see :data:`PARAMETERS` (``config/locator.yaml`` and
 ``docs/ros.md``); those marked dynamic apply at run time, after a check
 that refuses a bad value with the reason; the others are read-only.
@@ -63,6 +72,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data,
                        ReliabilityPolicy)
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import MultiArrayDimension, UInt16MultiArray
+from std_srvs.srv import Trigger
 
 from .image_codec import camera_from_info, fill_msg, image_from_msg
 from .memory import HeapTrimmer
@@ -435,7 +445,7 @@ class LocatorNode(Node):
         self._stats_lock = threading.Lock()
         self.stats = {'received': 0, 'processed': 0, 'dropped': 0, 'located': 0,
                       'refused_oversize': 0, 'clock_jumps': 0, 'odom_received': 0,
-                      'located_with_odometry': 0, 'odom_bridged_published': 0}
+                      'located_with_odometry': 0, 'odom_bridged_published': 0, 'resets': 0}
         # Per published fix: each covariance term's share of the position variance.
         self._shares: 'collections.deque[Dict[str, float]]' = collections.deque(
             maxlen=SHARES_KEPT)
@@ -468,6 +478,7 @@ class LocatorNode(Node):
         # Odometry: reliable, as nav_msgs/Odometry publishers (diff drive
         # controllers, robot_localization) publish it.
         self.create_subscription(Odometry, 'odom', self._on_odom, QoSProfile(depth=50))
+        self.create_service(Trigger, '~/reset', self._on_reset)
         wall_timer(self, 1.0, self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='locator-worker', daemon=True)
         self._worker.start()
@@ -527,6 +538,25 @@ class LocatorNode(Node):
                 self.localizer.last_fix = None
             if 'opencv_threads' in changed:
                 cv2.setNumThreads(int(s['opencv_threads']))
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        """Forget where the robot was (the module docstring's ``~/reset``)."""
+        with self._settings_lock:            # between frames, as a parameter change
+            had = self.localizer.last_fix
+            self.localizer.reset()
+            self.bridge.reset()
+            self.chooser.reset()
+            self._fix_frame = self._fix_room = None
+        with self._stats_lock:
+            self.stats['resets'] += 1
+        where = (f'the last fix (floor {had.ids.floor} room {had.ids.room} card '
+                 f'{had.ids.pattern}, in {had.frame_id})' if had is not None
+                 else 'nothing (no fix yet)')
+        response.success = True
+        response.message = f'locator reset: forgot {where}; the next fix counts as a first one'
+        self.get_logger().info(response.message)
+        return response
 
     # Callbacks (executor thread: store only) ---------------------------------------
 

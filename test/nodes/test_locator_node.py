@@ -28,6 +28,7 @@ from ros_tools import client_node, locator_process, spin_until
 from scene_tools import base_pose, BUILDING, CAMERA, view
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import UInt16MultiArray
+from std_srvs.srv import Trigger
 from test_image_codec import bayer_mosaic, packed, yuv422
 
 TILT_DEG = 15.0
@@ -363,6 +364,42 @@ def test_diagnostics_report_processing_and_waiting_apart(locator, graph):
     # joint_state_wait_s / odom_wait_s (50 ms each); what remains is the
     # thread's scheduling on a busy machine (up to a few ms), not a wait.
     assert float(values['joint_wait_ms_max']) < 20.0
+
+
+def test_reset_makes_the_next_fix_a_first_one(locator, graph):
+    # With continuity on, a first fix waits until a second image agrees;
+    # after ~/reset (a robot carried elsewhere) the next fix waits again,
+    # instead of being judged as a jump from where the robot was.
+    node, executor, publishers, received = graph
+    params = ParameterClient(node, executor, '/locator')
+    assert params.set_value('gates.continuity', True) == (True, '')
+    try:
+        image, _ = view(1, 3, TRUTH, 0.0, math.radians(TILT_DEG))
+        info = info_msg(CAMERA)
+
+        def held_back() -> int:
+            return int(diagnostics(received).get('gate_rejected_unconfirmed_first', -1))
+
+        assert spin_until(executor, lambda: held_back() >= 0, 5.0)
+        before = held_back()
+        assert send(graph, image_msg(image, 700), info, 700) is not None
+        assert spin_until(executor, lambda: held_back() > before, 5.0)
+
+        reset = node.create_client(Trigger, '/locator/reset')
+        assert reset.wait_for_service(timeout_sec=10.0)
+        future = reset.call_async(Trigger.Request())
+        assert spin_until(executor, future.done, 10.0)
+        answer = future.result()
+        assert answer.success, answer.message
+        assert 'floor 1 room 3 card 1' in answer.message, answer.message
+        assert spin_until(executor, lambda: diagnostics(received).get('resets') == '1', 5.0)
+
+        after_reset = held_back()
+        pose = send(graph, image_msg(image, 710), info, 710)
+        assert pose is not None and position_error(pose) < 0.04
+        assert spin_until(executor, lambda: held_back() > after_reset, 5.0)
+    finally:
+        assert params.set_value('gates.continuity', False) == (True, '')
 
 
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):

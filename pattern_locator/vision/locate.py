@@ -7,7 +7,7 @@ it holds no ROS types.
 
 from dataclasses import dataclass
 import math
-from typing import Iterable, List, Optional
+from typing import Iterable, List, Optional, Tuple
 
 import numpy as np
 
@@ -90,7 +90,7 @@ class CardLocator:
             return _no_pose(card, self.estimator, 'grey image: no code, so no pose')
         try:
             if self.estimator == 'paper':
-                return self._paper(card, camera)
+                return self._paper(card, camera, prior)
             return self._exact(card, camera, prior)
         except EstimationError as exc:
             return _no_pose(card, self.estimator, str(exc))
@@ -110,13 +110,51 @@ class CardLocator:
                            flip_barrier=est.flip_barrier,
                            prior_information=est.prior_information)
 
-    def _paper(self, card: CardDetection, camera: CameraModel) -> LocatedCard:
+    def _paper(self, card: CardDetection, camera: CameraModel,
+               prior: Optional[PosePrior]) -> LocatedCard:
         from .pose_paper import estimate_paper
         est = estimate_paper(card.points_px, camera, self.config, min_tilt_deg=self.min_tilt_deg)
         covariance = covariance_of_pose(est.T_camera_pattern, card.points_px, camera,
                                         self.config, self.pixel_sigma)
+        alternative, other_probability, barrier = flip_as_exact_sees(
+            est.T_camera_pattern, card.points_px, camera, self.config, prior, self.pixel_sigma)
         return LocatedCard(card, est.T_camera_pattern, covariance, est.reprojection_rms_px, None,
-                           est.psi_deg, est.phi_deg, est.theta_deg, est.distance_m, 'paper')
+                           est.psi_deg, est.phi_deg, est.theta_deg, est.distance_m, 'paper',
+                           alternative=alternative, other_probability=other_probability,
+                           flip_barrier=barrier)
+
+
+def flip_as_exact_sees(T_camera_pattern: Pose, points_px: np.ndarray, camera: CameraModel,
+                       config: PatternConfig, prior: Optional[PosePrior] = None,
+                       pixel_sigma: Optional[float] = None
+                       ) -> Tuple[Optional[Pose], float, float]:
+    """
+    Return the planar flip of a pose from another estimator: other pose, probability, barrier.
+
+    The flip is the dots' ambiguity, not an estimator's: the exact
+    estimator's two planar solutions on the same dots (with the same prior)
+    stand for it, and the pose is taken as the nearer of the two (camera
+    positions). The other one, how likely it is (the exact estimator's
+    ``other_probability``, or its complement when the pose is at the
+    solution that estimator did not choose) and its ``flip_barrier``: what
+    the localizer's flip gate judges. ``(None, 0, inf)`` when the dots give
+    the exact estimator no pose or only one solution.
+    """
+    try:
+        exact = estimate_exact(points_px, camera, config, prior=prior, pixel_sigma=pixel_sigma)
+    except EstimationError:
+        return None, 0.0, math.inf
+    if exact.alternative is None:
+        return None, 0.0, math.inf
+    here = T_camera_pattern.inverse().t
+    chosen, other = exact.T_camera_pattern, exact.alternative
+    probability = exact.other_probability
+    if not math.isfinite(exact.flip_barrier):
+        # No close call: the dots rule the other solution out.
+        probability = 0.0
+    if np.linalg.norm(here - other.inverse().t) < np.linalg.norm(here - chosen.inverse().t):
+        chosen, other, probability = other, chosen, 1.0 - probability
+    return other, probability, exact.flip_barrier
 
 
 def _no_pose(card: CardDetection, estimator: str, problem: str) -> LocatedCard:

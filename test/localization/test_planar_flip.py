@@ -89,12 +89,12 @@ def test_the_posterior_is_a_probability_a_farther_rival_lowers(p, chosen, rival,
     assert _posterior(p, chosen + farther, rival) >= q
 
 
-def errors_from_scratch(views, gates):
+def errors_from_scratch(views, gates, estimator='exact'):
     """Each image to a new localizer (no last fix): the fix's error (m) or None, and it."""
     robot, pan, tilt, images = views
     out = []
     for image in images:
-        localizer = RobotLocalizer(PATTERN, FLIP_MAP, HEAD, gates=gates)
+        localizer = RobotLocalizer(PATTERN, FLIP_MAP, HEAD, gates=gates, estimator=estimator)
         result = localizer.process(image, CAMERA, pan, tilt, stamp_s=0.0)
         fix = result.fix
         out.append((None if fix is None else float(np.linalg.norm(fix.T_frame_base.t - robot.t)),
@@ -177,3 +177,20 @@ def test_a_valley_gives_no_fix_however_sure_the_side(valley):
     seen = [result for _, result, _ in gated if result.cards_seen]
     assert len(seen) >= len(SEEDS) - 2
     assert all('shallow valley' in result.no_fix_reason for result in seen)
+
+
+def test_the_paper_estimator_meets_the_same_flip_gate(valley, monkeypatch):
+    # The flip is the dots' ambiguity, not the estimator's: the paper's
+    # estimator, ungated, puts the robot more than 0.6 m off from some image
+    # of the valley; gated (the exact estimator's two solutions on the same
+    # dots stand for the flip), no image gives a fix.
+    with monkeypatch.context() as patched:
+        patched.setattr(localizer_module, 'FLIP_VALLEY_BARRIER', 0.0)
+        off = GateParameters(confirm_first_fix=False, max_flip_probability=0.5)
+        errors = [e for e, _, _ in errors_from_scratch(valley, off, 'paper') if e is not None]
+        assert errors and max(errors) > 0.6
+    gated = errors_from_scratch(valley, GateParameters(confirm_first_fix=False), 'paper')
+    assert all(e is None for e, _, _ in gated)
+    seen = [result for _, result, _ in gated if result.cards_seen]
+    assert len(seen) >= len(SEEDS) - 2
+    assert all('planar flip unsure' in result.no_fix_reason for result in seen)

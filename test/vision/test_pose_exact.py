@@ -299,3 +299,31 @@ def test_pose_helpers_are_consistent():
     T = pose_from(2.0, 30.0, 45.0)
     assert np.allclose((T @ T.inverse()).matrix(), np.eye(4))
     assert isinstance(T, Pose)
+
+
+def test_another_estimators_pose_meets_the_flip_as_the_exact_estimator_sees_it():
+    from pattern_locator.vision.locate import flip_as_exact_sees
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    # A close call: at either planar solution the other is the alternative,
+    # the probabilities complementary, the barrier the same.
+    T = pose_from(5.7, 6.0, 90.0)
+    obs = ellipse_observations(camera, T, np.random.default_rng(3), 0.05)
+    exact = estimate_exact(obs, camera, CFG)
+    assert math.isfinite(exact.flip_barrier) and exact.other_probability > 1e-3
+    other, p, barrier = flip_as_exact_sees(exact.T_camera_pattern, obs, camera, CFG)
+    assert np.allclose(other.t, exact.alternative.t) and p == exact.other_probability
+    assert barrier == exact.flip_barrier
+    other, p, _ = flip_as_exact_sees(exact.alternative, obs, camera, CFG)
+    assert np.allclose(other.t, exact.T_camera_pattern.t)
+    assert p == pytest.approx(1.0 - exact.other_probability)
+    # No close call: the solution the dots rule out is certainly wrong.
+    T = pose_from(2.0, 40.0, 30.0)
+    obs = ellipse_observations(camera, T, np.random.default_rng(3), 0.05)
+    exact = estimate_exact(obs, camera, CFG)
+    assert exact.flip_barrier == math.inf
+    assert flip_as_exact_sees(exact.T_camera_pattern, obs, camera, CFG)[1:] == (0.0, math.inf)
+    assert flip_as_exact_sees(exact.alternative, obs, camera, CFG)[1] == 1.0
+    # Too few dots for the exact estimator: nothing to say.
+    few = obs.copy()
+    few[5:] = np.nan
+    assert flip_as_exact_sees(T, few, camera, CFG) == (None, 0.0, math.inf)

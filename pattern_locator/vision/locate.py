@@ -148,12 +148,10 @@ def flip_as_exact_sees(T_camera_pattern: Pose, points_px: np.ndarray, camera: Ca
         return None, 0.0, math.inf
     here = T_camera_pattern.inverse().t
     chosen, other = exact.T_camera_pattern, exact.alternative
-    probability = exact.other_probability
-    if not math.isfinite(exact.flip_barrier):
-        # No close call: the dots rule the other solution out.
-        probability = 0.0
+    # No close call (no barrier): the dots rule the other solution out.
+    probability = exact.other_probability if math.isfinite(exact.flip_barrier) else 0.0
     if np.linalg.norm(here - other.inverse().t) < np.linalg.norm(here - chosen.inverse().t):
-        chosen, other, probability = other, chosen, 1.0 - probability
+        return chosen, 1.0 - probability, exact.flip_barrier
     return other, probability, exact.flip_barrier
 
 

@@ -13,7 +13,9 @@ camera pose is a planar Perspective-n-Point problem over up to 17 points:
 * the solution with the lower reprojection error wins, unless the two are
   nearly equal (``ambiguity`` close to 1, the planar "flip"), where what is
   known about the camera (a :class:`PosePrior`) decides, and the other
-  solution's probability is reported (``other_probability``);
+  solution's probability is reported (``other_probability``); in such a
+  close call the prior's up and height also take part in the last
+  refinement (the MAP pose) and in the covariance;
 * the covariance is ``s^2 (J^T J)^-1`` with J the Jacobian of the
   reprojection with respect to the camera pose in the pattern frame.
 """
@@ -62,15 +64,14 @@ class PosePrior:
     def penalty(self, T_camera_pattern: Pose, previous: bool = True) -> float:
         """Chi-square-like disagreement of a pose with this prior (``previous``: its last term)."""
         total = 0.0
-        if self.up_in_camera is not None:
-            up = np.asarray(self.up_in_camera, dtype=float)
-            up = up / np.linalg.norm(up)
+        up, up_weight, height, height_weight = self.fit_terms()
+        if up_weight > 0.0:
             seen = T_camera_pattern.R[:, 1]
             angle = math.acos(float(np.clip(seen @ up, -1.0, 1.0)))
-            total += (angle / self.up_sigma_rad) ** 2
+            total += (angle * up_weight) ** 2
         camera = T_camera_pattern.inverse().t
-        if self.camera_height is not None:
-            total += ((camera[1] - self.camera_height) / self.height_sigma) ** 2
+        if height_weight > 0.0:
+            total += ((camera[1] - height) * height_weight) ** 2
         if previous and self.previous_camera_in_pattern is not None:
             d = np.linalg.norm(camera - np.asarray(self.previous_camera_in_pattern))
             total += (d / self.previous_sigma) ** 2
@@ -79,16 +80,25 @@ class PosePrior:
     @property
     def fits(self) -> bool:
         """Whether the prior has a term the pose's fit can use (up or height)."""
-        return self.up_in_camera is not None or self.camera_height is not None
+        _, up_weight, _, height_weight = self.fit_terms()
+        return up_weight > 0.0 or height_weight > 0.0
 
     def fit_terms(self) -> Tuple[np.ndarray, float, float, float]:
-        """Return up (unit, camera frame), 1/its sigma, the height and 1/its sigma (0: none)."""
+        """
+        Return up (unit, camera frame), 1/its sigma, the height and 1/its sigma (0: none).
+
+        A term that is not a finite number with a positive, finite sigma
+        (an up of length 0, a NaN height) is left out, weight 0.
+        """
         up, up_weight = np.zeros(3), 0.0
         if self.up_in_camera is not None:
-            up = np.asarray(self.up_in_camera, dtype=float)
-            up, up_weight = up / np.linalg.norm(up), 1.0 / self.up_sigma_rad
+            given = np.asarray(self.up_in_camera, dtype=float).reshape(-1)
+            norm = float(np.linalg.norm(given)) if given.shape == (3,) else math.nan
+            if math.isfinite(norm) and norm > 0.0 and _usable_sigma(self.up_sigma_rad):
+                up, up_weight = given / norm, 1.0 / self.up_sigma_rad
         height, height_weight = 0.0, 0.0
-        if self.camera_height is not None:
+        if self.camera_height is not None and math.isfinite(self.camera_height) \
+                and _usable_sigma(self.height_sigma):
             height, height_weight = float(self.camera_height), 1.0 / self.height_sigma
         return up, up_weight, height, height_weight
 
@@ -234,6 +244,11 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
     )
 
 
+def _usable_sigma(sigma: float) -> bool:
+    """Tell whether a prior's sigma can weigh a term: positive and finite."""
+    return math.isfinite(sigma) and sigma > 0.0
+
+
 def _flip_noise2(best_rms: float, pixel_sigma: Optional[float]) -> float:
     """
     Return the pixel variance the two planar solutions' costs are counted in.
@@ -319,9 +334,10 @@ def pose_covariance(T_camera_pattern: Pose, object_points: np.ndarray, K: np.nda
     J = pose_jacobian(R, t, obj, _f64(K))
     info = J.T @ J / float(sigma_px) ** 2 + prior_information
     try:
-        return np.linalg.inv(info)
+        covariance = np.linalg.inv(info)
     except np.linalg.LinAlgError:
         return np.full((6, 6), np.inf)
+    return 0.5 * (covariance + covariance.T)
 
 
 def ellipse_centres(T_camera_pattern: Pose, centres_xy: np.ndarray, radii: np.ndarray,

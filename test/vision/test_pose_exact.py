@@ -242,6 +242,18 @@ def test_the_prior_information_is_its_terms_linearised():
     J = np.column_stack([(residuals(h * e) - residuals(-h * e)) / (2 * h) for e in np.eye(6)])
     assert np.allclose(prior.information(T), J.T @ J, rtol=1e-5, atol=1e-6)
     assert not PosePrior(previous_camera_in_pattern=np.zeros(3)).fits
+    # What cannot weigh a term is left out, never a NaN in the fit.
+    for broken in (PosePrior(up_in_camera=np.zeros(3)), PosePrior(camera_height=math.nan),
+                   PosePrior(up_in_camera=np.array([0.0, 1.0, math.inf])),
+                   PosePrior(camera_height=0.2, height_sigma=0.0),
+                   PosePrior(up_in_camera=np.array([0.0, 1.0, 0.0]), up_sigma_rad=math.nan)):
+        assert not broken.fits and not np.any(broken.information(T))
+    camera = CameraModel.from_focal(640, 480, 1000.0)
+    far = pose_from(6.0, 3.0, 180.0)
+    obs = ellipse_observations(camera, far, np.random.default_rng(1), 0.08)
+    broken = PosePrior(up_in_camera=np.zeros(3), camera_height=math.nan)
+    est = estimate_exact(obs, camera, CFG, prior=broken)
+    assert est.prior_information is None and np.all(np.isfinite(est.covariance))
 
 
 def test_up_and_height_hold_a_far_pose_in_the_valley(monkeypatch):

@@ -134,6 +134,11 @@ PARAMETERS: Tuple[Param, ...] = (
           0.0, 89.0, dynamic=True),
     Param('max_reprojection_px', 1.5, 'reject poses with a larger RMS reprojection error',
           0.01, 100.0, dynamic=True),
+    Param('up_sigma_deg', 5.0, "how well the head's tilt and the base's attitude give the "
+          "card's up in the camera (deg): it resolves the planar flip and, in a close call, "
+          'takes part in the pose', 0.1, 90.0, dynamic=True),
+    Param('camera_height_sigma_m', 0.15, "how well the camera's height above the floor is "
+          'known (m; the base on the floor): as up_sigma_deg', 0.001, 10.0, dynamic=True),
     Param('use_joint_states', True, 'take the head angles from camera/joint_states (else the '
           'fixed ones)', dynamic=True),
     Param('fixed_pan_deg', 0.0, 'head pan when joint states are not used (+ = left)',
@@ -389,6 +394,7 @@ class LocatorNode(Node):
             self.pattern, building, self.head, estimator=p['estimator'],
             output_frame=p['output_frame'], fusion=p['fusion'],
             min_tilt_deg=p['min_tilt_deg'], max_reprojection_px=p['max_reprojection_px'],
+            camera_height_sigma=p['camera_height_sigma_m'], up_sigma_deg=p['up_sigma_deg'],
             gates=gate_parameters(p), uncertainty=uncertainty_parameters(p))
         # Every pass of the detector run once now (the compiled ones are loaded
         # at import), not on the first camera frame; and a drawn card read.
@@ -524,6 +530,8 @@ class LocatorNode(Node):
             self.localizer.output_frame = s['output_frame']
             self.localizer.fusion = s['fusion']
             self.localizer.max_reprojection_px = float(s['max_reprojection_px'])
+            self.localizer.up_sigma = math.radians(float(s['up_sigma_deg']))
+            self.localizer.camera_height_sigma = float(s['camera_height_sigma_m'])
             self.joints.max_age_s = float(s['joint_state_max_age_s'])
             if any(name.startswith('gates.') for name in changed):
                 self.localizer.gates.parameters = gate_parameters(s)

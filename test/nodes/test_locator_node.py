@@ -351,6 +351,16 @@ def test_parameters_are_validated_and_applied_at_run_time(locator, graph):
     pose = send(graph, image_msg(image, 703), info, 703)
     assert pose is not None and pose.header.frame_id == 'floor_1/room_3'
 
+    # The prior's sigmas: in range, applied; out of range, refused with the reason.
+    ok, reason = params.set_value('up_sigma_deg', 0.0)
+    assert not ok and 'up_sigma_deg' in reason, reason
+    assert params.set_value('up_sigma_deg', 10.0)[0]
+    assert params.set_value('camera_height_sigma_m', 0.3)[0]
+    pose = send(graph, image_msg(image, 704), info, 704)
+    assert pose is not None and position_error(pose) < 0.04
+    for name, value in (('up_sigma_deg', 5.0), ('camera_height_sigma_m', 0.15)):
+        assert params.set_value(name, value)[0]
+
 
 def test_diagnostics_report_processing_and_waiting_apart(locator, graph):
     node, executor, publishers, received = graph
@@ -382,7 +392,7 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
 
         assert spin_until(executor, lambda: held_back() >= 0, 5.0)
         before = held_back()
-        assert send(graph, image_msg(image, 700), info, 700) is not None
+        assert send(graph, image_msg(image, 1000), info, 1000) is not None
         assert spin_until(executor, lambda: held_back() > before, 5.0)
 
         reset = node.create_client(Trigger, '/locator/reset')
@@ -395,7 +405,7 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         assert spin_until(executor, lambda: diagnostics(received).get('resets') == '1', 5.0)
 
         after_reset = held_back()
-        pose = send(graph, image_msg(image, 710), info, 710)
+        pose = send(graph, image_msg(image, 1010), info, 1010)
         assert pose is not None and position_error(pose) < 0.04
         assert spin_until(executor, lambda: held_back() > after_reset, 5.0)
     finally:

@@ -196,7 +196,8 @@ class CameraDriverNode(Node):
         p = self.parameters.values()
         self.params = p
         self.parameters.check_all(self._validate)
-        self.get_logger().info('camera_driver configuration: ' + describe_values(p))
+        for line in describe_values(p):
+            self.get_logger().info('camera_driver configuration: ' + line)
         self.zoom_table = ZoomTable.load(p['zoom_table']) if p['zoom_table'] else None
         self.card_radius_m = float(load_pattern_config(p['pattern_config'] or None)
                                    .ring_radii[0])

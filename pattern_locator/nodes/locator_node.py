@@ -370,10 +370,11 @@ class LocatorNode(Node):
         self.parameters = Parameters(self, PARAMETERS)
         p = self.parameters.values()
         groups = tuple(prefix + '.' for prefix, _, _ in PARAMETER_GROUPS)
-        self.get_logger().info('locator configuration: ' + describe_values(
-            {k: v for k, v in p.items() if not k.startswith(groups)}))
+        for line in describe_values({k: v for k, v in p.items() if not k.startswith(groups)}):
+            self.get_logger().info('locator configuration: ' + line)
         for prefix, _, _ in PARAMETER_GROUPS:
-            self.get_logger().info(f'locator {prefix}: ' + describe_values(_group(p, prefix)))
+            for line in describe_values(_group(p, prefix)):
+                self.get_logger().info(f'locator {prefix}: ' + line)
         cv2.setNumThreads(int(p['opencv_threads']))
         self.pattern = load_pattern_config(p['pattern_config'] or None)
         building = load_building(p['building_map'] or None, self.pattern)

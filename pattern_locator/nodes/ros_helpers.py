@@ -303,9 +303,26 @@ def declared_parameters(specs: Sequence[Param]) -> Tuple[str, ...]:
     return tuple(s.name for s in specs)
 
 
-def describe_values(values: Mapping[str, Any]) -> str:
-    """Return ``name=value, ...`` for a node's start-up log line."""
-    return ', '.join(f'{k}={v}' for k, v in sorted(values.items()))
+def describe_values(values: Mapping[str, Any], width: int = 400) -> List[str]:
+    """
+    Return ``name=value, ...`` for a node's start-up log, as lines of at most ``width``.
+
+    Sorted by name; an entry longer than a line (a long path) is cut with
+    '...': the log's lines stay short however many parameters a node has.
+    """
+    lines: List[str] = []
+    line = ''
+    for k, v in sorted(values.items()):
+        entry = f'{k}={v}'
+        if len(entry) > width:
+            entry = entry[:width - 3] + '...'
+        if line and len(line) + 2 + len(entry) > width:
+            lines.append(line)
+            line = ''
+        line = f'{line}, {entry}' if line else entry
+    if line or not lines:
+        lines.append(line)
+    return lines
 
 
 # Running a node -------------------------------------------------------------------------

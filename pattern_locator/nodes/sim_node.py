@@ -321,7 +321,8 @@ class SimNode(Node):
             PointStamped, 'pattern_locator/target', lambda _: self._first_target.set(),
             qos_profile_sensor_data) if p['wait_for_target'] else None)
         self.get_logger().info(f'emulated EVI-D31 on {self.camera.port}')
-        self.get_logger().info('sim configuration: ' + describe_values(p))
+        for line in describe_values(p):
+            self.get_logger().info('sim configuration: ' + line)
         self.get_logger().info(f'route: {what}')
         wall_timer(self, 1.0 / p['odom_rate_hz'], self._on_odometry_timer)
         wall_timer(self, 1.0, self._publish_diagnostics)

@@ -55,3 +55,18 @@ def test_problems_are_throttled_by_kind_and_cut():
     log.report('rejected: position uncertain by', 'card K-KRGBGRBB: position uncertain by 2 m')
     assert logger.lines[-1].endswith(
         "(3 more 'rejected: position uncertain by' problems since the last report)")
+
+
+def test_the_start_up_log_is_short_lines_with_every_parameter():
+    """describe_values: every parameter named, no line longer than its width, long values cut."""
+    from pattern_locator.nodes.locator_node import PARAMETERS
+    from pattern_locator.nodes.ros_helpers import describe_values
+
+    values = {p.name: p.default for p in PARAMETERS}
+    values['building_map'] = '/very/long/path/' * 60
+    lines = describe_values(values, width=300)
+    assert len(lines) > 1 and all(len(line) <= 300 for line in lines)
+    text = ', '.join(lines)
+    assert all(f'{name}=' in text for name in values)
+    assert 'building_map=/very/long/path/' in text and '...' in text
+    assert describe_values({}) == ['']

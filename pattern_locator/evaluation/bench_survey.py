@@ -59,7 +59,7 @@ def _init(plan: FloorPlan, walk: Walk, camera) -> None:
     pattern = load_pattern_config()
     _WORKER.update(plan=plan, walk=walk, camera=camera, renderer=WalkRenderer(plan, camera,
                                                                               pattern),
-                   locator=CardLocator(pattern))
+                   locator=CardLocator(pattern, fit_prior=False))     # as the survey's
 
 
 def _render_and_detect(frame: int):

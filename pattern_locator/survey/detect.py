@@ -60,7 +60,9 @@ _LOCATOR = None
 def _init_worker(pattern: PatternConfig) -> None:
     global _LOCATOR
     from ..vision.locate import CardLocator
-    _LOCATOR = CardLocator(pattern, estimator='exact')
+    # The graph's floor factors hold the keyframes upright already: up only
+    # chooses between the planar solutions here, not in the pose's fit.
+    _LOCATOR = CardLocator(pattern, estimator='exact', fit_prior=False)
 
 
 def sightings_of(located: Sequence['LocatedCard'], bag: int, frame: int, stamp: int

@@ -57,12 +57,13 @@ class CardLocator:
     def __init__(self, config: PatternConfig, estimator: str = 'exact',
                  detector_params: DetectorParams = DetectorParams(),
                  min_tilt_deg: float = 0.0, pixel_sigma: Optional[float] = None,
-                 known_codes: Optional[Iterable[Code]] = None):
+                 known_codes: Optional[Iterable[Code]] = None, fit_prior: bool = True):
         """
         Detect with ``detector_params``, locate with ``estimator``.
 
         ``known_codes`` (a building map's codes) let the detector complete a
         card partly hidden by an object (see :class:`Detector`).
+        ``fit_prior``: as :func:`.pose_exact.estimate_exact`'s.
         """
         if estimator not in ESTIMATORS:
             raise ConfigError(f'unknown estimator {estimator!r}: use one of '
@@ -72,6 +73,7 @@ class CardLocator:
         self.detector = Detector(config, detector_params, known_codes)
         self.min_tilt_deg = min_tilt_deg
         self.pixel_sigma = pixel_sigma
+        self.fit_prior = fit_prior
 
     def locate(self, image: np.ndarray, camera: CameraModel,
                prior: Optional[PosePrior] = None) -> List[LocatedCard]:
@@ -98,7 +100,7 @@ class CardLocator:
     def _exact(self, card: CardDetection, camera: CameraModel,
                prior: Optional[PosePrior]) -> LocatedCard:
         est = estimate_exact(card.points_px, camera, self.config, prior=prior,
-                             pixel_sigma=self.pixel_sigma)
+                             pixel_sigma=self.pixel_sigma, fit_prior=self.fit_prior)
         psi, phi, theta, distance = paper_angles(est.T_camera_pattern, camera, self.config)
         if phi < self.min_tilt_deg:
             return _no_pose(card, 'exact', f'tilt {phi:.1f} deg below the minimum '

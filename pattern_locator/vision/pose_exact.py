@@ -154,9 +154,16 @@ class PoseEstimate:
 
 def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternConfig,
                    prior: Optional[PosePrior] = None, pixel_sigma: Optional[float] = None,
-                   bias_correction: bool = True, ambiguity_threshold: float = 2.0
-                   ) -> PoseEstimate:
-    """Camera pose from detected dot centres (``(n_dots, 2)`` pixels, NaN = not seen)."""
+                   bias_correction: bool = True, ambiguity_threshold: float = 2.0,
+                   fit_prior: bool = True) -> PoseEstimate:
+    """
+    Camera pose from detected dot centres (``(n_dots, 2)`` pixels, NaN = not seen).
+
+    ``fit_prior``: in a close call, fit the prior's up and height with the
+    dots (the MAP pose); False: the prior only chooses between the planar
+    solutions (for a caller that counts up and height elsewhere, as the
+    survey's graph does).
+    """
     points_px = np.asarray(points_px, dtype=float)
     if points_px.shape != (config.n_dots, 2):
         raise EstimationError(f'expected {config.n_dots} dot positions, got {points_px.shape}')
@@ -213,11 +220,11 @@ def estimate_exact(points_px: np.ndarray, camera: CameraModel, config: PatternCo
         cleaned = points_px.copy()
         cleaned[np.flatnonzero(seen)[outliers]] = np.nan
         return estimate_exact(cleaned, camera, config, prior, pixel_sigma, bias_correction,
-                              ambiguity_threshold)
+                              ambiguity_threshold, fit_prior)
     other = candidates[1 - best] if len(candidates) > 1 else None
     sigma = max(math.sqrt(ss / max(2 * n - 6, 1)), pixel_sigma or 0.0, DEFAULT_MIN_SIGMA_PX)
     prior_information = None
-    if prior is not None and prior.fits and math.isfinite(barrier):
+    if fit_prior and prior is not None and prior.fits and math.isfinite(barrier):
         # A close call: far and nearly face on, the image alone leaves the
         # card's turn in a shallow valley, where the dots' sub-pixel errors
         # set it (_flip_barrier). What is known of up and height then holds

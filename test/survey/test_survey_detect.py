@@ -52,3 +52,18 @@ def test_a_pose_in_one_valley_with_its_flip_is_counted_not_sighted():
                                  flip_barrier=2.0)
     sightings, unsure = detect.sightings_of([valley], 0, 0, 0)
     assert sightings == [] and unsure == 1
+
+
+def test_the_survey_fits_no_prior_into_its_poses():
+    # The survey's graph holds the keyframes upright with its floor factors:
+    # its locator lets up choose between the planar solutions only, where
+    # the robot's locator fits it into a close call's pose too.
+    from pattern_locator.vision.locate import CardLocator
+    from pattern_locator.vision.pose_exact import PosePrior
+    detect._init_worker(CFG)
+    image = image_of(6.0, 6.0, 180.0, (0, 0))      # far, nearly face on: a close call
+    located = detect._LOCATOR.locate(image, CAMERA, PosePrior(up_in_camera=[0.0, -1.0, 0.0]))
+    robot = CardLocator(CFG).locate(image, CAMERA, PosePrior(up_in_camera=[0.0, -1.0, 0.0]))
+    assert len(located) == 1 and len(robot) == 1
+    assert located[0].flip_barrier < float('inf')
+    assert located[0].prior_information is None and robot[0].prior_information is not None

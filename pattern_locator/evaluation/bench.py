@@ -35,7 +35,7 @@ import numpy as np
 from .baselines import make_locator, square_pose_solutions, tag_card_bitmap
 from .demo import PAPER_TABLE1
 from ..card.pattern import Ids, load_pattern_config, PatternConfig
-from ..localization.gates import FLIP_VALLEY_BARRIER, MAX_FLIP_PROBABILITY
+from ..localization.gates import flip_unsure, MAX_FLIP_PROBABILITY
 from ..sim.paper_setup import paper_camera
 from ..sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement, DotCardTexture,
                           Occluder, render_scene, RenderOptions)
@@ -213,8 +213,7 @@ def run_dots(locator: CardLocator, camera: CameraModel, scene: Scene, image: np.
             flipped = _is_flip(est.T_camera_pattern, est.alternative, T, scene.distance)
             if use_prior:
                 out.flipped = flipped
-                out.flip_unsure = est.other_probability > MAX_FLIP_PROBABILITY or (
-                    est.alternative is not None and not est.flip_barrier >= FLIP_VALLEY_BARRIER)
+                out.flip_unsure = flip_unsure(est.other_probability, est.flip_barrier)
             else:
                 out.flipped_without_prior = flipped
         # Dot-centre noise against the true ellipse centres, and the bound for it.

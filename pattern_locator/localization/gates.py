@@ -74,6 +74,17 @@ FLIP_VALLEY_BARRIER = 9.0
 ADJACENT_MIN_LENGTH_M = 0.5
 
 
+def flip_unsure(other_probability: float, flip_barrier: float) -> bool:
+    """
+    Tell whether a pose's planar flip is unsure with no last fix to go by.
+
+    The other pose more likely than the flip gate's default, or the two in
+    one shallow valley of the fit: the poses the survey and the benchmark
+    count unsure (the localizer's gate also weighs its last fix).
+    """
+    return other_probability > MAX_FLIP_PROBABILITY or not flip_barrier >= FLIP_VALLEY_BARRIER
+
+
 @dataclass(frozen=True)
 class GateParameters:
     """

@@ -26,7 +26,7 @@ from .bagio import BagData, camera_on_base, decode_image, iter_images, Mount
 from .sightings import Sighting
 from ..card.pattern import PatternConfig
 from ..errors import PatternLocatorError
-from ..localization.gates import FLIP_VALLEY_BARRIER, MAX_FLIP_PROBABILITY
+from ..localization.gates import flip_unsure
 from ..vision.camera import CameraModel
 from ..vision.pose_exact import PosePrior
 
@@ -49,8 +49,8 @@ class DetectionStats:
     wall_s: float
     cpu_s: float            # summed over the workers' frames (detection, decoding included)
     jobs: int
-    # Poses left out because the other planar pose was as likely as the
-    # locator's flip gate allows (a card far away and nearly face on).
+    # Poses left out because their planar flip was unsure (gates.flip_unsure:
+    # a card far away and nearly face on).
     unsure_flips: int = 0
 
 
@@ -84,8 +84,7 @@ def sightings_of(located: Sequence['LocatedCard'], bag: int, frame: int, stamp: 
             continue
         if not np.all(np.isfinite(card.covariance)):
             continue
-        if card.other_probability > MAX_FLIP_PROBABILITY or not (
-                card.flip_barrier >= FLIP_VALLEY_BARRIER):
+        if flip_unsure(card.other_probability, card.flip_barrier):
             unsure += 1
             continue
         det = card.detection

@@ -235,8 +235,9 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
     grey = image.ndim == 2
     h, w = image.shape[:2]
     s = params.decimate if min(h, w) >= 48 * params.decimate else 1
+    halves = s == 2 and not grey
     halved = None
-    if s == 2 and not grey:
+    if halves and field in ('auto', 'frame'):
         # Halved, its darkest channel and (field 'auto') the comb test in one
         # pass over the frame (card_kernels.halve: OpenCV's area resize, the
         # minimum over B, G, R and combed()'s tiles, to the bit).
@@ -246,9 +247,9 @@ def segment(image: np.ndarray, params: DetectorParams) -> DotImage:
     elif field == 'auto':
         field = 'even' if combed(image) else 'frame'
     if field in ('even', 'odd'):
+        # One field (set, or a comb found): the frame halved is not this image.
         image = one_field(image, field)
-        if halved is not None:
-            halved = card_kernels.halve(_read_only(image), 0)
+        halved = card_kernels.halve(_read_only(image), 0) if halves else None
     if halved is not None:
         small, coarse = halved[0], halved[1]
     elif s == 2:

@@ -22,8 +22,9 @@ a far card's flat valley), in about a third of its time (27 against 95 us).
 as measurements too: the MAP pose of a close planar call.
 
 The exact estimator's other small passes are here too (:func:`project_points`,
-:func:`circle_image_centres`, :func:`point_residuals`, :func:`pose_jacobian`,
-:func:`pose_covariance_matrix`, :func:`circle_axis_angle`): as numpy calls
+:func:`pose_cost`, :func:`circle_image_centres`, :func:`point_residuals`,
+:func:`pose_jacobian`, :func:`pose_covariance_matrix`,
+:func:`circle_axis_angle`): as numpy calls
 on 17 points they were some thirty calls of fixed cost a pose (274 us a
 pose with them, 105 without); the results agree with the numpy code's to
 1e-12 (test_fit_kernels.py). So are its start, IPPE's two planar poses
@@ -281,7 +282,7 @@ def _rotation(w0, w1, w2):
 
 
 @_kernel
-def _pose_cost(obj, img, K, R, t):
+def pose_cost(obj, img, K, R, t):
     """Sum of squared distances in the ideal image (K's pinhole, skew included)."""
     total = 0.0
     for i in range(obj.shape[0]):
@@ -342,7 +343,7 @@ def refine_pose_prior(obj, img, K, R, t, pixel_weight, up, up_weight, height, he
     jrow = np.empty(6)
     lam = 1e-3
     pw2 = pixel_weight * pixel_weight
-    cost = pw2 * _pose_cost(obj, img, K, R, t) + _prior_cost(
+    cost = pw2 * pose_cost(obj, img, K, R, t) + _prior_cost(
         R, t, up, up_weight, height, height_weight)
     if not cost < np.inf:
         return R, t
@@ -406,7 +407,7 @@ def refine_pose_prior(obj, img, K, R, t, pixel_weight, up, up_weight, height, he
             t_trial = np.empty(3)
             for k in range(3):
                 t_trial[k] = t[k] - step[3 + k]
-            trial_cost = pw2 * _pose_cost(obj, img, K, R_trial, t_trial) + _prior_cost(
+            trial_cost = pw2 * pose_cost(obj, img, K, R_trial, t_trial) + _prior_cost(
                 R_trial, t_trial, up, up_weight, height, height_weight)
             if trial_cost < cost:
                 done = cost - trial_cost <= 1e-15 * max(cost, 1e-30) \
@@ -754,6 +755,7 @@ def warm_up() -> None:
     refine_pose_prior(plane, square * 100.0, K, R, t, 2.0, np.array([0.0, 1.0, 0.0]), 10.0,
                       0.0, 5.0)
     project_points(R, t, plane, K)
+    pose_cost(plane, square * 100.0, K, R, t)
     planar_poses(plane, square * 100.0, K)
     circle_image_centres(R, t, square, np.ones(len(square)), K)
     pose_jacobian(R, t, plane, K)

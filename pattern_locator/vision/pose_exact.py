@@ -29,7 +29,7 @@ import numpy as np
 
 from .camera import CameraModel
 from .fit_kernels import (circle_axis_angle, circle_image_centres, planar_poses,
-                          point_residuals, pose_covariance_matrix, pose_jacobian,
+                          point_residuals, pose_cost, pose_covariance_matrix, pose_jacobian,
                           project_points, refine_exact, refine_pose, refine_pose_prior)
 from .geometry import Pose, rodrigues, rotation_vector
 from .per_config import made_once
@@ -290,13 +290,13 @@ def _flip_barrier(obj: np.ndarray, observed: np.ndarray, K: np.ndarray, candidat
     """
     (cost_a, R_a, t_a, _), (_, R_b, t_b, _) = candidates[best], candidates[1 - best]
     turn = rotation_vector(R_b @ R_a.T)
+    t_a, t_b = np.asarray(t_a, dtype=float), np.asarray(t_b, dtype=float)
     highest = cost_a
     for k in range(1, steps + 1):
         s = k / (steps + 1.0)
-        R = _f64(rodrigues(s * turn) @ R_a)
-        t = _f64((1.0 - s) * np.asarray(t_a, dtype=float) + s * np.asarray(t_b, dtype=float))
-        projected = project_points(R, t, obj, K)
-        highest = max(highest, float(np.sum((projected - observed) ** 2)))
+        # The squared error as the refinement counts it, no arrays per step.
+        highest = max(highest, pose_cost(obj, observed, K, _f64(rodrigues(s * turn) @ R_a),
+                                         _f64((1.0 - s) * t_a + s * t_b)))
     return (highest - cost_a) / sigma2
 
 

@@ -304,7 +304,7 @@ def test_homography_rounds_drop_the_points_off_the_fit_as_one_step_at_a_time():
 
 
 def test_the_prior_refinement_finds_the_map_pose():
-    from pattern_locator.vision.fit_kernels import (_pose_cost, _prior_cost, refine_pose,
+    from pattern_locator.vision.fit_kernels import (pose_cost, _prior_cost, refine_pose,
                                                     refine_pose_prior)
 
     rng = np.random.default_rng(17)
@@ -313,7 +313,7 @@ def test_the_prior_refinement_finds_the_map_pose():
     sigma, up_sigma, height_sigma = 0.3, np.radians(5.0), 0.1
 
     def total(R, t, up, height):
-        return _pose_cost(obj, img, K, R, t) / sigma ** 2 + _prior_cost(
+        return pose_cost(obj, img, K, R, t) / sigma ** 2 + _prior_cost(
             R, t, up, 1.0 / up_sigma, height, 1.0 / height_sigma)
 
     for _ in range(100):

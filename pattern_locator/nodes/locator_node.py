@@ -40,7 +40,9 @@ Services
     looks for the cards near it, until a new fix): the next fix is judged
     as a first one (held back until a second image agrees, while
     ``gates.confirm_first_fix``), with no last fix to decide a planar flip
-    or a partly hidden card's code.
+    or a partly hidden card's code. ``robot_location/with_covariance`` is
+    published anew, holding no fix until the next: a subscriber that joins
+    after the reset does not start from the old place.
 
 Parameters: see :data:`PARAMETERS` (``config/locator.yaml`` and
 ``docs/ros.md``); those marked dynamic apply at run time, after a check
@@ -464,11 +466,7 @@ class LocatorNode(Node):
 
         self.pub_pose = self.create_publisher(PoseStamped, 'robot_location', 10)
         self.pub_ids = self.create_publisher(UInt16MultiArray, 'robot_location/ids', 10)
-        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_cov = self.create_publisher(PoseWithCovarianceStamped,
-                                             'robot_location/with_covariance', latched)
+        self.pub_cov = self._latched_fix_publisher()
         self.pub_bridged = self.create_publisher(PoseWithCovarianceStamped,
                                                  'robot_location/odom_bridged', 10)
         self.pub_target = self.create_publisher(PointStamped, 'pattern_locator/target', 10)
@@ -489,6 +487,14 @@ class LocatorNode(Node):
         wall_timer(self, 1.0, self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='locator-worker', daemon=True)
         self._worker.start()
+
+    def _latched_fix_publisher(self) -> Any:
+        # Transient local, depth 1: a late subscriber gets the last fix.
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        return self.create_publisher(PoseWithCovarianceStamped,
+                                     'robot_location/with_covariance', latched)
 
     def _subscribe_images(self) -> Any:
         # Best effort, like the sensor-data profile, but only the newest frame:
@@ -557,6 +563,11 @@ class LocatorNode(Node):
             self.bridge.reset()
             self.chooser.reset()
             self._fix_frame = self._fix_room = None
+            # The latched fix is the old place too: a subscriber that joins
+            # now (a navigation stack restarted) would start from it. A new
+            # publisher holds nothing until the next fix.
+            self.destroy_publisher(self.pub_cov)
+            self.pub_cov = self._latched_fix_publisher()
         with self._stats_lock:
             self.stats['resets'] += 1
         where = (f'the last fix (floor {had.ids.floor} room {had.ids.room} card '

@@ -23,7 +23,7 @@ import pytest
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from ros_tools import client_node, locator_process, spin_until
 from scene_tools import base_pose, BUILDING, CAMERA, view
 from sensor_msgs.msg import CameraInfo, Image
@@ -394,6 +394,9 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         before = held_back()
         assert send(graph, image_msg(image, 1000), info, 1000) is not None
         assert spin_until(executor, lambda: held_back() > before, 5.0)
+        # A fix published before the reset (continuity lets the second agree).
+        assert send(graph, image_msg(image, 1001), info, 1001) is not None
+        assert latched_stamps(node, executor) == [1001]
 
         reset = node.create_client(Trigger, '/locator/reset')
         assert reset.wait_for_service(timeout_sec=10.0)
@@ -403,13 +406,34 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         assert answer.success, answer.message
         assert 'floor 1 room 3 card 1' in answer.message, answer.message
         assert spin_until(executor, lambda: diagnostics(received).get('resets') == '1', 5.0)
+        # A subscriber that joins now does not start from the old place.
+        assert latched_stamps(node, executor) == []
 
         after_reset = held_back()
         pose = send(graph, image_msg(image, 1010), info, 1010)
         assert pose is not None and position_error(pose) < 0.04
         assert spin_until(executor, lambda: held_back() > after_reset, 5.0)
+        assert send(graph, image_msg(image, 1011), info, 1011) is not None
+        assert latched_stamps(node, executor) == [1011]
     finally:
         assert params.set_value('gates.continuity', False) == (True, '')
+
+
+def latched_stamps(node, executor, window: float = 1.5) -> list:
+    """Return the stamps (seconds) a subscriber joining robot_location/with_covariance gets."""
+    got = []
+    latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    sub = node.create_subscription(PoseWithCovarianceStamped, '/robot_location/with_covariance',
+                                   lambda m: got.append(m.header.stamp.sec), latched)
+    try:
+        assert spin_until(executor, lambda: sub.get_publisher_count() >= 1, 10.0)
+        # Matched: a latched fix arrives at once; none within the window is none.
+        spin_until(executor, lambda: bool(got), window)
+        return got
+    finally:
+        node.destroy_subscription(sub)
 
 
 def test_ctrl_c_is_a_clean_shutdown(locator, graph):

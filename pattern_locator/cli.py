@@ -428,12 +428,12 @@ def card_json(card: LocatedCard) -> dict:
             out['covariance'] = [[float(f'{v:.4g}') for v in row] for row in card.covariance]
         if card.ambiguity is not None and math.isfinite(card.ambiguity):
             out['ambiguity'] = round(float(card.ambiguity), 3)
-        if card.estimator == 'exact':
-            out['other_probability'] = float(f'{card.other_probability:.3g}')
-            if card.other_probability > 0.0 and card.alternative is not None:
-                out['other_camera_in_pattern_m'] = _rounded(card.alternative.inverse().t, 5)
-            if math.isfinite(card.flip_barrier):
-                out['flip_barrier'] = float(f'{card.flip_barrier:.3g}')
+        # Either estimator (the paper's flip as the exact one sees the dots).
+        out['other_probability'] = float(f'{card.other_probability:.3g}')
+        if card.other_probability > 0.0 and card.alternative is not None:
+            out['other_camera_in_pattern_m'] = _rounded(card.alternative.inverse().t, 5)
+        if math.isfinite(card.flip_barrier):
+            out['flip_barrier'] = float(f'{card.flip_barrier:.3g}')
     else:
         out['problem'] = card.problem
     return out

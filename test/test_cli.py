@@ -207,6 +207,15 @@ def test_detect_reports_the_other_planar_pose_when_the_image_cannot_decide(scene
     assert one['flip_barrier'] is None
     status, out, _ = detect(capsys, paths['faceon.png'], '--camera', paths['camera'])
     assert status == 0 and re.search(r'other planar pose \S+ % likely: camera at x', out), out
+    # The paper's estimator reports the same flip (the dots', not an estimator's).
+    status, out, _ = detect(capsys, paths['faceon.png'], paths['one.png'], '--camera',
+                            paths['camera'], '--json', '--estimator', 'paper')
+    paper, paper_one = (lines['patterns'][0] for lines in json_lines(out))
+    assert status == 0 and paper['estimator'] == 'paper'
+    assert 1e-3 < paper['other_probability'] < 1.0 and paper['flip_barrier'] >= 0.0
+    assert min(np.linalg.norm(np.array(paper['other_camera_in_pattern_m']) - p)
+               for p in positions) < 0.1
+    assert paper_one['other_probability'] == 0.0 and paper_one['flip_barrier'] is None
 
 
 # Errors ----------------------------------------------------------------------------------

@@ -1597,10 +1597,16 @@ def _comb_row(ring, r, cols, t1, t2):
     """Add row ``r``'s curvatures over one row and over two (ring of five rows) to its tiles."""
     above2, above1, mid_row, below1, below2 = (r - 2) % 5, (r - 1) % 5, r % 5, (r + 1) % 5, \
         (r + 2) % 5
-    for j in range(cols):
-        mid = 2 * ring[mid_row, j]
-        t1[j // 4] += abs(mid - ring[above1, j] - ring[below1, j])
-        t2[j // 4] += abs(mid - ring[above2, j] - ring[below2, j])
+    # A tile's four columns together (no division per column).
+    for tile in range(cols // 4):
+        one = 0
+        two = 0
+        for j in range(4 * tile, 4 * tile + 4):
+            mid = 2 * ring[mid_row, j]
+            one += abs(mid - ring[above1, j] - ring[below1, j])
+            two += abs(mid - ring[above2, j] - ring[below2, j])
+        t1[tile] += one
+        t2[tile] += two
 
 
 @_kernel
@@ -1670,6 +1676,10 @@ def halve(image, comb_tile_rows):
     t2 = np.zeros(max(tiles, 1), dtype=np.int64)
     ring = np.empty((5, max(cols, 1)), dtype=np.int64)
     count = 0
+    # Each pair of rows summed per byte first (a plain loop over the flat
+    # rows, compiled to vector instructions), then each 2 x 2 block's sum
+    # from the pair sums: twice as fast as summing four bytes per channel.
+    pair = np.empty(6 * w2, dtype=np.uint16)
     for q in range(h):
         row_q = flat[q]
         if comb and count < 2 and q < rows + 4:
@@ -1685,17 +1695,19 @@ def halve(image, comb_tile_rows):
         if q % 2 == 1 and q // 2 < h2:
             y = q // 2
             r0 = flat[q - 1]
-            r1 = row_q
+            for i in range(6 * w2):
+                pair[i] = np.uint16(r0[i]) + np.uint16(row_q[i])
             o = out[y]
+            d = darkest[y]
             for x in range(w2):
                 i = 6 * x
-                blue = (np.int32(r0[i]) + r0[i + 3] + r1[i] + r1[i + 3] + 2) >> 2
-                green = (np.int32(r0[i + 1]) + r0[i + 4] + r1[i + 1] + r1[i + 4] + 2) >> 2
-                red = (np.int32(r0[i + 2]) + r0[i + 5] + r1[i + 2] + r1[i + 5] + 2) >> 2
+                blue = np.uint8((pair[i] + pair[i + 3] + 2) >> 2)
+                green = np.uint8((pair[i + 1] + pair[i + 4] + 2) >> 2)
+                red = np.uint8((pair[i + 2] + pair[i + 5] + 2) >> 2)
                 o[3 * x] = blue
                 o[3 * x + 1] = green
                 o[3 * x + 2] = red
-                darkest[y, x] = min(blue, min(green, red))
+                d[x] = min(blue, min(green, red))
     return small, darkest, count
 
 

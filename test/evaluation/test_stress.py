@@ -2,6 +2,7 @@
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 from pattern_locator.card.pattern import load_pattern_config
@@ -82,6 +83,12 @@ def test_tables_show_every_row_and_the_targets(rows):
         assert name in table
     targets = stress.targets_table(rows)
     assert '0 wrong ids in every condition' in targets and 'met' in targets
+    # Each camera's own median ratio beside both cameras' (here 640x480 only:
+    # the same figure).
+    both = re.search(r'time median <= 0.25x AprilTag \(all stress frames\)\s+(\S+)x', targets)
+    alone = re.search(r'median, 640x480 fx=1000 frames alone\s+(\S+)x', targets)
+    assert both and alone and both.group(1) == alone.group(1), targets
+    assert '1280x720 70deg barrel frames alone' not in targets
 
 
 def test_peak_extra_memory_sees_a_native_allocation():

@@ -415,6 +415,9 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         assert spin_until(executor, lambda: held_back() > after_reset, 5.0)
         assert send(graph, image_msg(image, 1011), info, 1011) is not None
         assert latched_stamps(node, executor) == [1011]
+        # A subscriber from before the reset goes on receiving (the new publisher matches it).
+        assert spin_until(executor, lambda: any(m.header.stamp.sec == 1011
+                                                for m in received['cov']), 5.0)
     finally:
         assert params.set_value('gates.continuity', False) == (True, '')
 

@@ -559,8 +559,12 @@ def stress_table(rows: Dict[str, Row]) -> str:
             + _num(ratios[3], 2, 6))
     if 'far' in rows and rows['far'].april_d1:
         far = rows['far']
+        # A far dot whose colour JPEG greyed is an unread slot, as a hidden one.
+        more = sum(r.among_candidates and not r.found for r in far.dots)
         lines.append(f'far: AprilTag with decimate 1 finds {_rate(far.april_d1, far.frames):.1f} %'
-                     f' ({sum(r.wrong_ids for r in far.april_d1)} wrong ids)')
+                     f' ({sum(r.wrong_ids for r in far.april_d1)} wrong ids); ours: {more} more '
+                     f'of {len(far.frames)} gave the card among the few mapped codes that fit '
+                     f'the slots read (as for occlusion, below)')
     hidden = rows.get('occlusion')
     if hidden is not None and hidden.frames:
         more = sum(r.among_candidates and not r.found for r in hidden.dots)

@@ -281,7 +281,12 @@ def test_two_namespaced_robots_side_by_side_on_one_domain(tmp_path):
             assert max(errors) < 0.5, (ns, errors)
             still = [float(np.linalg.norm(f.located_base.t - f.true_base.t))
                      for f in located(observer, still=True)]
-            assert max(still) < 0.05, (ns, still)
+            # Typically 0.5-3 cm at 4 m. Six nodes share two cores here, and
+            # a single fix was once 6.1 cm off beside two of 1.4 and 1.6 cm
+            # (fresh-clone CI): the median holds the accuracy, the max only
+            # what a loaded machine's timing allows (a joint or namespace
+            # mix-up would be tens of centimetres).
+            assert float(np.median(still)) < 0.03 and max(still) < 0.10, (ns, still)
     finally:
         executor.shutdown()
         for observer in observers.values():

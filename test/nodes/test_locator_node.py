@@ -396,7 +396,7 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         assert spin_until(executor, lambda: held_back() > before, 5.0)
         # A fix published before the reset (continuity lets the second agree).
         assert send(graph, image_msg(image, 1001), info, 1001) is not None
-        assert latched_stamps(node, executor) == [1001]
+        assert set(latched_stamps(node, executor)) == {1001}
 
         reset = node.create_client(Trigger, '/locator/reset')
         assert reset.wait_for_service(timeout_sec=10.0)
@@ -414,7 +414,7 @@ def test_reset_makes_the_next_fix_a_first_one(locator, graph):
         assert pose is not None and position_error(pose) < 0.04
         assert spin_until(executor, lambda: held_back() > after_reset, 5.0)
         assert send(graph, image_msg(image, 1011), info, 1011) is not None
-        assert latched_stamps(node, executor) == [1011]
+        assert set(latched_stamps(node, executor)) == {1011}
         # A subscriber from before the reset goes on receiving (the new publisher matches it).
         assert spin_until(executor, lambda: any(m.header.stamp.sec == 1011
                                                 for m in received['cov']), 5.0)

@@ -26,7 +26,7 @@ from typing import Dict, Iterator, List, Optional, Tuple, Union
 import numpy as np
 
 from ..errors import CodeError, ConfigError
-from ..resources import config_path, read_yaml
+from ..resources import config_path, read_yaml, UniqueKeyLoader
 
 COLOURS = 'KRGB'
 RING_POINTS = 8
@@ -137,6 +137,10 @@ class PatternConfig:
         CodeField('pattern', (6, 7), 1),
     )
     handedness_mark: Optional[HandednessMark] = HandednessMark()
+    # The inks as printed (sRGB against the sheet's paper), measured with
+    # `pattern-locator inks`; None: as ``colours_rgb`` asks. The detector
+    # reads dots by these; the printer prints ``colours_rgb``.
+    inks_rgb: Optional[Tuple[Tuple[str, Tuple[int, int, int]], ...]] = None
 
     def __post_init__(self) -> None:
         _validate(self)
@@ -182,7 +186,12 @@ class PatternConfig:
         return [code.centre] + list(code.ring) * self.n_rings
 
     def colour_rgb(self, letter: str) -> Tuple[int, int, int]:
+        """Return the sRGB colour the card's file asks the printer for."""
         return dict(self.colours_rgb)[letter]
+
+    def ink_rgb(self, letter: str) -> Tuple[int, int, int]:
+        """Return the ink as printed (``inks_rgb``, measured), else as asked (``colours_rgb``)."""
+        return dict(self.inks_rgb if self.inks_rgb is not None else self.colours_rgb)[letter]
 
     # Handedness marks --------------------------------------------------------
 
@@ -311,6 +320,9 @@ def _validate(cfg: PatternConfig) -> None:
     colours = dict(cfg.colours_rgb)
     if sorted(colours) != sorted(COLOURS):
         raise ConfigError(f'pattern: colours must define K, R, G, B, got {sorted(colours)}')
+    if cfg.inks_rgb is not None and sorted(dict(cfg.inks_rgb)) != sorted(COLOURS):
+        raise ConfigError(f'pattern: inks must define K, R, G, B, got '
+                          f'{sorted(dict(cfg.inks_rgb))}')
     if sorted(dict(cfg.ring_digits)) != sorted('RGB') or sorted(
             dict(cfg.ring_digits).values()) != [0, 1, 2]:
         raise ConfigError('pattern: code.ring_digits must map R, G, B to 0, 1, 2')
@@ -363,10 +375,35 @@ def _parse_hex(letter: str, text: str) -> Tuple[int, int, int]:
     return tuple(int(text[i:i + 2], 16) for i in (0, 2, 4))
 
 
+# The keys a pattern YAML may hold, per level: any other is a mistake (a
+# misspelt `colors:` or a key indented under the wrong parent would
+# otherwise leave its default in force without a word).
+_KEYS = ('card_size', 'ring_radii', 'ring_dot_radius', 'centre_dot_radius', 'colours', 'inks',
+         'code', 'handedness_mark')
+_CODE_KEYS = ('ring_digits', 'centre_digits', 'fields')
+_MARK_KEYS = ('angles_deg', 'radius', 'distance')
+_FIELD_KEYS = ('dots', 'first')
+
+
+def _known_keys(mapping: dict, allowed: Tuple[str, ...], where: str) -> None:
+    unknown = [str(k) for k in mapping if k not in allowed]
+    if unknown:
+        raise ConfigError(f'{where}: unknown key {", ".join(map(repr, unknown))} (known: '
+                          f'{", ".join(allowed)})')
+
+
+def _colour_table(data: dict, key: str, source: str) -> Tuple[Tuple[str, Tuple[int, ...]], ...]:
+    table = data[key]
+    if not isinstance(table, dict):
+        raise ConfigError(f'{source}: {key} must map K, R, G, B to "#rrggbb"')
+    return tuple((str(k), _parse_hex(k, v)) for k, v in table.items())
+
+
 def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConfig:
     """Build a PatternConfig from parsed YAML; ConfigError names the bad key."""
     if not isinstance(data, dict):
         raise ConfigError(f'{source}: expected a mapping at the top level')
+    _known_keys(data, _KEYS, source)
     defaults = PatternConfig()
     try:
         kwargs = {
@@ -379,13 +416,13 @@ def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConf
     except (TypeError, ValueError) as exc:
         raise ConfigError(f'{source}: geometry values must be numbers in metres ({exc})')
     if 'colours' in data:
-        colours = data['colours']
-        if not isinstance(colours, dict):
-            raise ConfigError(f'{source}: colours must map K, R, G, B to "#rrggbb"')
-        kwargs['colours_rgb'] = tuple((str(k), _parse_hex(k, v)) for k, v in colours.items())
+        kwargs['colours_rgb'] = _colour_table(data, 'colours', source)
+    if data.get('inks') is not None:
+        kwargs['inks_rgb'] = _colour_table(data, 'inks', source)
     code = data.get('code', {}) or {}
     if not isinstance(code, dict):
         raise ConfigError(f'{source}: code must be a mapping')
+    _known_keys(code, _CODE_KEYS, f'{source}: code')
     for key in ('ring_digits', 'centre_digits'):
         if key in code:
             table = code[key]
@@ -399,6 +436,7 @@ def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConf
         for name, spec in code['fields'].items():
             if not isinstance(spec, dict) or 'dots' not in spec:
                 raise ConfigError(f'{source}: code.fields.{name} needs a "dots" list')
+            _known_keys(spec, _FIELD_KEYS, f'{source}: code.fields.{name}')
             dots = tuple(d if d == CENTRE else int(d) for d in spec['dots'])
             fields.append(CodeField(str(name), dots, int(spec.get('first', 0))))
         kwargs['fields'] = tuple(fields)
@@ -416,6 +454,7 @@ def _mark_from_dict(spec, source: str) -> Optional[HandednessMark]:
     if not isinstance(spec, dict):
         raise ConfigError(f'{source}: handedness_mark must be a mapping (angles_deg, and '
                           f'optionally radius, distance) or null for cards printed without it')
+    _known_keys(spec, _MARK_KEYS, f'{source}: handedness_mark')
     default = HandednessMark()
     try:
         return HandednessMark(
@@ -429,7 +468,7 @@ def _mark_from_dict(spec, source: str) -> Optional[HandednessMark]:
 def load_pattern_config(path: Optional[Union[str, Path]] = None) -> PatternConfig:
     """Load a pattern YAML (default: the shipped ``config/pattern.yaml``)."""
     path = Path(path) if path is not None else config_path('pattern.yaml')
-    data = read_yaml(path, 'pattern configuration')
+    data = read_yaml(path, 'pattern configuration', loader=UniqueKeyLoader)
     try:
         return pattern_config_from_dict(data, str(path))
     except (TypeError, ValueError, OverflowError) as exc:

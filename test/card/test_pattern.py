@@ -4,7 +4,9 @@ import numpy as np
 from pattern_locator.card.pattern import (Code, Ids, load_pattern_config, pattern_config_from_dict,
                                           PatternConfig)
 from pattern_locator.errors import CodeError, ConfigError
+from pattern_locator.resources import config_path
 import pytest
+import yaml
 
 
 @pytest.fixture(scope='module')
@@ -101,6 +103,13 @@ def test_custom_layout_is_honoured():
     ({'code': {'fields': {'floor': {'dots': ['centre', 1]}, 'room': {'dots': [2, 3, 4, 5]},
                           'pattern': {'dots': [6, 7, 8]}}}}, 'not "centre" or a ring point'),
     ({'card_size': 'big'}, 'must be numbers'),
+    ({'colors': {'K': '#000000'}}, "unknown key 'colors'"),
+    ({'code': {'angles_deg': [22.5]}}, "code: unknown key 'angles_deg'"),
+    ({'code': {'fields': {'floor': {'dots': ['centre', 8], 'frist': 0}, 'room': {'dots': [
+        2, 3, 4, 5]}, 'pattern': {'dots': [6, 7]}}}}, "fields.floor: unknown key 'frist'"),
+    ({'handedness_mark': {'angle_deg': [22.5, 202.5]}}, 'handedness_mark: unknown key'),
+    ({'inks': {'K': '#000000', 'R': '#ff0000', 'G': '#00ff00'}}, 'inks must define'),
+    ({'inks': ['#000000']}, 'inks must map'),
 ])
 def test_bad_configuration_names_the_problem(data, words):
     with pytest.raises(ConfigError, match=words):
@@ -118,6 +127,29 @@ def test_broken_yaml_file_is_one_clear_error(tmp_path):
 
 def test_defaults_equal_the_shipped_file(cfg):
     assert PatternConfig() == cfg
+
+
+def test_the_shipped_file_sets_each_key_where_it_belongs():
+    # Its handedness_mark key once sat inside a comment, its angles then
+    # under `code:`, silently ignored (now an error).
+    data = yaml.safe_load(config_path('pattern.yaml').read_text())
+    assert data['handedness_mark'] == {'angles_deg': [22.5, 202.5]}
+    assert sorted(data['code']) == ['centre_digits', 'fields', 'ring_digits']
+
+
+def test_a_key_given_twice_is_refused(tmp_path):
+    twice = tmp_path / 'pattern.yaml'
+    twice.write_text('card_size: 0.3\ncard_size: 0.2\n')
+    with pytest.raises(ConfigError, match='duplicate key'):
+        load_pattern_config(twice)
+
+
+def test_measured_inks_are_read_by_and_printed_from_colours():
+    cfg = pattern_config_from_dict({'inks': {'K': '#343434', 'R': '#ee3c42', 'G': '#35aa60',
+                                             'B': '#464898'}})
+    assert cfg.ink_rgb('B') == (0x46, 0x48, 0x98) and cfg.colour_rgb('B') == (16, 64, 208)
+    plain = PatternConfig()
+    assert plain.inks_rgb is None and plain.ink_rgb('B') == plain.colour_rgb('B')
 
 
 def test_handedness_marks_scale_with_the_card_and_are_chiral(cfg):

@@ -1,5 +1,5 @@
 """
-The ``pattern-locator`` command line: make-pattern, detect, bench, demo.
+The ``pattern-locator`` command line: make-pattern, detect, inks, bench, demo.
 
 Errors a user can cause end as one readable line on stderr and exit status 2.
 """
@@ -119,12 +119,33 @@ def _parser() -> argparse.ArgumentParser:
     detect.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
     detect.set_defaults(handler=_detect)
 
+    inks = sub.add_parser(
+        'inks', help="measure a printed card's inks for the pattern configuration",
+        description='Measure the inks of one printed card from photos or scans of it '
+                    '(face-on, evenly lit, the whole card in view), compare them with those '
+                    'of the pattern configuration, and print the `inks:` block that makes the '
+                    "detector read that printer's cards. Exit status 0: the inks match; 1: "
+                    'they differ (put the block in the pattern configuration); 2: an error.')
+    inks.add_argument('images', nargs='+', metavar='IMAGE',
+                      help='colour photos or scans of the same printed card')
+    inks.add_argument('--floor', type=int, required=True, help="the card's floor id")
+    inks.add_argument('--room', type=int, required=True, help="the card's room id")
+    inks.add_argument('--pattern', type=int, required=True, help="the card's number in its room")
+    inks.add_argument('--camera', help='ROS camera-info YAML of the camera (optional: undoes '
+                                       'its lens; a scan needs none)')
+    inks.add_argument('--max-pixels', type=_number_in(1, 2 ** 31, int, '--max-pixels'),
+                      default=DEFAULT_MAX_PIXELS, metavar='N',
+                      help=f'refuse images with more pixels than this (default '
+                           f'{DEFAULT_MAX_PIXELS})')
+    inks.add_argument('--pattern-config', help='pattern YAML (default: the shipped one)')
+    inks.set_defaults(handler=_inks)
+
     bench = sub.add_parser('bench', help='accuracy and speed against AprilTag and ArUco',
                            description='Render seeded scenes and compare with AprilTag '
                                        'and ArUco, printing tables.')
     bench.add_argument('--scenes', type=int, default=None,
                        help='scenes per distance bin and camera (default 40); with --stress, '
-                            'frames per condition and camera (default 10)')
+                            'frames per condition and camera (default 10; --inks: 2)')
     bench.add_argument('--seed', type=int, default=1, help='seed of the scenes (default 1)')
     bench.add_argument('--quick', action='store_true',
                        help='a smoke test: one scene each; its figures are noise')
@@ -132,6 +153,9 @@ def _parser() -> argparse.ArgumentParser:
                        help='one row per hard condition (textures, dark noise, clutter, '
                             'coloured light, chromatic shift, mirrors, dim, blur, occlusion, '
                             'interlace, far) next to AprilTag on the same frames')
+    bench.add_argument('--inks', action='store_true',
+                       help="cards printed in several printers' inks, read by the configured "
+                            'colours and by the inks `pattern-locator inks` measured')
     bench.add_argument('--output-dir', default='out',
                        help='where the plots, logs and summaries go (default out/)')
     bench.add_argument('--tracking', action='store_true',
@@ -391,6 +415,35 @@ def _detect(args: argparse.Namespace) -> int:
     return status
 
 
+# inks --------------------------------------------------------------------------
+
+def _inks(args: argparse.Namespace) -> int:
+    from .card.pattern import Ids
+    from .vision.camera import load_camera
+    from .vision.image_file import read_image
+    from .vision.ink_check import MIN_MATCH_MARGIN, measure_inks
+    cfg = load_pattern_config(args.pattern_config)
+    ids = Ids(args.floor, args.room, args.pattern)
+    cfg.encode(*ids.as_tuple())                 # ids out of range: one line, before reading
+    camera = load_camera(args.camera) if args.camera else None
+    images = [(name, read_image(name, max_pixels=args.max_pixels)) for name in args.images]
+    report = measure_inks(images, cfg, ids, camera)
+    print(f'card floor {ids.floor} room {ids.room} card {ids.pattern} (code {report.code}), '
+          f'{report.images} image(s), ring dots {2 * report.dot_radius_px:.0f} px across')
+    print(report.table())
+    differ = [ink.letter for ink in report.inks if not ink.matches]
+    if differ:
+        print(f'The detector would not read ink {", ".join(differ)} as configured (it reads '
+              f'each dot by the nearest configured ink; a margin below {MIN_MATCH_MARGIN} is '
+              f'unsure). Put this in the pattern configuration, for every node and tool that '
+              f'reads these cards:')
+    else:
+        print('The inks match the configuration. To read them by the measured inks anyway, '
+              'put this in the pattern configuration:')
+    print(report.yaml_block())
+    return 1 if differ else 0
+
+
 def _rounded(values, digits: int) -> List:
     return np.round(np.asarray(values, dtype=float), digits).tolist()
 
@@ -478,12 +531,12 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
 # bench and demo ---------------------------------------------------------------------
 
 def _bench(args: argparse.Namespace) -> int:
-    kinds = [name for name in ('stress', 'node', 'tracking', 'fuzz', 'survey', 'drive')
+    kinds = [name for name in ('stress', 'inks', 'node', 'tracking', 'fuzz', 'survey', 'drive')
              if getattr(args, name)]
     if args.drive_core is not None:
         kinds.append('drive_core')
     if len(kinds) > 1:
-        raise ConfigError('bench: choose one of --stress, --node, --tracking, --fuzz, '
+        raise ConfigError('bench: choose one of --stress, --inks, --node, --tracking, --fuzz, '
                           '--survey, --drive, --drive-core (got '
                           f'{" and ".join("--" + k.replace("_", "-") for k in kinds)})')
     if args.drive_core is not None:
@@ -514,6 +567,9 @@ def _bench(args: argparse.Namespace) -> int:
         return run_survey_bench(quick=args.quick, seed=args.seed)
     if args.scenes is not None and not 1 <= args.scenes <= 1000:
         raise ConfigError(f'bench: --scenes must be 1..1000, got {args.scenes}')
+    if args.inks:
+        from .evaluation.bench_inks import run_inks_bench
+        return run_inks_bench(per_camera=args.scenes or 2, seed=args.seed, quick=args.quick)
     if args.stress:
         from .evaluation.stress import run_stress
         return run_stress(per_camera=args.scenes or 10, seed=args.seed, quick=args.quick,

@@ -10,13 +10,14 @@ import sys
 
 import cv2
 import numpy as np
-from pattern_locator.card.pattern import PatternConfig
+from pattern_locator.card.pattern import Ids, pattern_config_from_dict, PatternConfig
 from pattern_locator.cli import main
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture, Occluder,
-                                        render_scene, RenderOptions)
+                                        printed_card_texture, render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel, save_camera
 from pattern_locator.vision.pose_exact import paper_angles
 import pytest
+import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 CFG = PatternConfig()
@@ -450,3 +451,35 @@ def test_detect_refuses_a_truncated_jpeg_in_one_line(scene, capfd, tmp_path):
     assert status == 2 and out == ''
     (line,) = error_lines(err)
     assert str(truncated) in line and 'truncated' in line
+
+
+# inks ---------------------------------------------------------------------------------------
+
+def test_inks_says_whether_the_printed_inks_match_and_prints_the_block(tmp_path, capsys):
+    office = (('K', (35, 31, 32)), ('R', (237, 28, 36)), ('G', (0, 166, 81)),
+              ('B', (46, 49, 146)))
+    paths = {}
+    for name, inks in (('as_configured.png', None), ('office.png', office)):
+        T = card_pose_facing(0.9, 8.0, 30.0, 4.0, (20.0, -10.0), CAMERA)
+        texture = printed_card_texture(CFG, Ids(2, 17, 3), inks=inks)
+        image = render_scene(CAMERA, [CardPlacement(T, texture)],
+                             RenderOptions(noise_sigma=1.5, seed=2)).image
+        paths[name] = str(tmp_path / name)
+        assert cv2.imwrite(paths[name], image)
+    ids = ['--floor', '2', '--room', '17', '--pattern', '3']
+    assert main(['inks', paths['as_configured.png'], *ids]) == 0
+    out, _ = capsys.readouterr()
+    assert 'The inks match' in out
+    assert main(['inks', paths['office.png'], *ids, '--camera', str(tmp_path / 'none.yaml')]) == 2
+    error_lines(capsys.readouterr().err)
+    assert main(['inks', paths['office.png'], *ids]) == 1
+    out, _ = capsys.readouterr()
+    assert 'would not read ink B' in out
+    block = out[out.index('inks:'):]
+    measured = pattern_config_from_dict(yaml.safe_load(block))
+    assert measured.ink_rgb('B')[2] < 170 and measured.colour_rgb('B') == CFG.colour_rgb('B')
+    # Other ids than the card's, and ids out of range: one line each, status 2.
+    for wrong in (['--floor', '2', '--room', '17', '--pattern', '4'],
+                  ['--floor', '2', '--room', '170', '--pattern', '3']):
+        assert main(['inks', paths['office.png'], *wrong]) == 2
+        assert len(error_lines(capsys.readouterr().err)) == 1

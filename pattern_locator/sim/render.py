@@ -25,7 +25,7 @@ visibility samples each dot disc with the same visibility rules as the
 renderer.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import functools
 import math
 from typing import List, Optional, Protocol, Sequence, Tuple
@@ -33,7 +33,7 @@ from typing import List, Optional, Protocol, Sequence, Tuple
 import cv2
 import numpy as np
 
-from ..card.pattern import Code, PatternConfig, srgb_to_linear
+from ..card.pattern import Code, Ids, PatternConfig, srgb_to_linear
 from ..errors import CodeError, ConfigError, ImageError
 from ..vision.camera import CameraModel
 from ..vision.geometry import look_at, Pose, rodrigues
@@ -95,7 +95,8 @@ class DotCardTexture:
         if len(code.ring) != 8:
             raise CodeError(f'render: code {code} must have 8 ring colours')
         try:
-            rgb = [config.colour_rgb(letter) for letter in config.dot_colours(code)]
+            # The inks as printed (the configuration's measured inks, if any).
+            rgb = [config.ink_rgb(letter) for letter in config.dot_colours(code)]
         except KeyError as exc:
             raise CodeError(f'render: code {code} uses colour {exc} that the pattern '
                             f'configuration does not define') from None
@@ -109,7 +110,7 @@ class DotCardTexture:
             marks = config.mark_points()
             centres = np.vstack([centres, marks])
             radii = np.append(radii, np.full(len(marks), config.mark_radius))
-            rgb = rgb + [config.colour_rgb('K')] * len(marks)
+            rgb = rgb + [config.ink_rgb('K')] * len(marks)
         # Row k is circle k's ink (dots, then marks), the last row is the paper.
         self._colours = np.vstack([ink_reflectance(np.array(rgb, dtype=float), paper_white,
                                                    black_ink), np.full(3, paper_white)]
@@ -227,6 +228,32 @@ class BitmapCardTexture:
         col = np.floor((xy[:, 0] / self.size + 0.5) * cols).astype(np.intp)
         row = np.floor((0.5 - xy[:, 1] / self.size) * rows).astype(np.intp)
         return self._texels[np.clip(row, 0, rows - 1), np.clip(col, 0, cols - 1)]
+
+
+def printed_card_texture(config: PatternConfig, ids: Ids, dpi: float = 150.0,
+                         inks: Optional[Sequence[Tuple[str, Tuple[int, int, int]]]] = None
+                         ) -> BitmapCardTexture:
+    """
+    Return the card's square of its printed sheet as a texture: the card printer's own raster.
+
+    Not the renderer's drawing of a card: what ``make-pattern`` writes, with
+    its label and scale bar beside the card cut off by the card's edge.
+    ``inks`` (sRGB per letter) prints the dots as a printer that makes
+    those of the configured colours would (default: the colours).
+    """
+    from ..card.printable import Circle, layout_card, MM_PER_INCH, png_image
+    printer = config if inks is None else replace(config, colours_rgb=tuple(inks))
+    sheet = layout_card(printer, ids, 'a3')[0]
+    image = png_image(sheet, dpi=dpi)
+    centre = max((item for item in sheet.items if isinstance(item, Circle)), key=lambda c: c.r)
+    px_per_mm = dpi / MM_PER_INCH
+    half = config.card_size * 1000.0 / 2 * px_per_mm
+    side = int(round(2 * half))
+    shift = np.float32([[1, 0, half - centre.cx * px_per_mm],
+                        [0, 1, half - centre.cy * px_per_mm]])
+    square = cv2.warpAffine(image, shift, (side, side), flags=cv2.INTER_AREA,
+                            borderValue=(255, 255, 255))
+    return BitmapCardTexture(np.ascontiguousarray(square[:, :, ::-1]), config.card_size)
 
 
 # Scene description -------------------------------------------------------------

@@ -61,7 +61,7 @@ class Reading:
 
 def ink_darkness(config: PatternConfig) -> np.ndarray:
     """(4, 3) linear darkness (BGR) of the inks K, R, G, B against the paper."""
-    return np.array([1.0 - srgb_to_linear(np.array(config.colour_rgb(c))[::-1])
+    return np.array([1.0 - srgb_to_linear(np.array(config.ink_rgb(c))[::-1])
                      for c in LETTERS])
 
 

@@ -24,7 +24,7 @@ def draw_card(image: np.ndarray, config: PatternConfig, code: Code, centre_px: T
     """
     Draw the card of ``code`` face-on into a BGR ``image`` (in place), point 1 up.
 
-    The card's paper, its dots in their printed colours and its handedness
+    The card's paper, its dots in their printed inks and its handedness
     marks, ``px_per_m`` image pixels per metre of card, centred at
     ``centre_px`` (x, y).
     """
@@ -33,9 +33,10 @@ def draw_card(image: np.ndarray, config: PatternConfig, code: Code, centre_px: T
     cv2.rectangle(image, (int(cx - half), int(cy - half)), (int(cx + half), int(cy + half)),
                   PAPER_BGR, -1)
     points = config.model_points()[:, :2]
-    circles = [(p, r, config.colour_rgb(letter)) for p, r, letter in
+    # The inks as printed (they are what a camera sees of a printed card).
+    circles = [(p, r, config.ink_rgb(letter)) for p, r, letter in
                zip(points, config.dot_radii(), config.dot_colours(code))]
-    black = config.colour_rgb('K')
+    black = config.ink_rgb('K')
     circles += [(p, config.mark_radius, black) for p in config.mark_points()]
     for (x, y), radius, (r, g, b) in circles:
         centre = (int(round((cx + x * px_per_m) * (1 << _SHIFT))),

@@ -8,12 +8,9 @@ is hung in the scene: the ids must come back, and its mirror image must
 give none.
 """
 
-import cv2
-import numpy as np
 from pattern_locator.card.pattern import Ids, PatternConfig
-from pattern_locator.card.printable import Circle, layout_card, MM_PER_INCH, png_image
-from pattern_locator.sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement,
-                                        render_scene, RenderOptions)
+from pattern_locator.sim.render import (card_pose_facing, CardPlacement, MirroredTexture,
+                                        printed_card_texture, render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.detector import Detector
 import pytest
@@ -24,22 +21,10 @@ VGA = CameraModel.from_focal(640, 480, 1000.0)
 HD = CameraModel.from_fov(1280, 720, 70.0, D=[-0.25, 0.07, 0.0, 0.0, 0.0])
 
 
-def printed_card(ids, mirrored=False, dpi=150.0):
-    """Return the card's square of its printed sheet as a texture (white beyond the sheet)."""
-    sheet = layout_card(CFG, Ids(*ids), 'a3')[0]
-    image = png_image(sheet, dpi=dpi)
-    centre = max((item for item in sheet.items if isinstance(item, Circle)),
-                 key=lambda c: c.r)
-    px_per_mm = dpi / MM_PER_INCH
-    half = CFG.card_size * 1000.0 / 2 * px_per_mm
-    side = int(round(2 * half))
-    shift = np.float32([[1, 0, half - centre.cx * px_per_mm],
-                        [0, 1, half - centre.cy * px_per_mm]])
-    square = cv2.warpAffine(image, shift, (side, side), flags=cv2.INTER_AREA,
-                            borderValue=(255, 255, 255))
-    if mirrored:
-        square = square[:, ::-1]
-    return BitmapCardTexture(np.ascontiguousarray(square[:, :, ::-1]), CFG.card_size)
+def printed_card(ids, mirrored=False):
+    """Return the card's square of its printed sheet as a texture (mirrored: as in a mirror)."""
+    texture = printed_card_texture(CFG, Ids(*ids))
+    return MirroredTexture(texture) if mirrored else texture
 
 
 @pytest.mark.parametrize('camera, distance, view, azimuth, roll, ids', [

@@ -65,6 +65,23 @@ def test_positions_come_every_cycle_while_both_sockets_are_busy(emulator, camera
     assert loop.commands_sent >= sent
 
 
+def test_the_reading_is_handed_on_before_the_cycles_commands(camera):
+    # The node publishes its joint state from on_reading. Published after the
+    # Drive's ACK it came ~45 ms after its stamp, and a locator waiting 50 ms
+    # for the joint state after an image mostly held the one before, from
+    # before the head's last change of speed: fixes centimetres and many
+    # sigmas off while the head slewed to a new card.
+    handed = []
+    loop = tracking_loop(camera, on_reading=lambda r: handed.append((r, loop.commands_sent)))
+    for k in range(4):
+        sent = loop.commands_sent
+        loop.on_target(loop.clock(), 0.2 * (-1) ** k, 0.0, 100.0)
+        reading = loop.cycle()
+        assert handed[-1] == (reading, sent)            # before this cycle's Drive
+        assert loop.commands_sent > sent                 # which was sent after it
+    assert len(handed) == 4
+
+
 def test_a_camera_deaf_to_commands_costs_one_reply_timeout_not_the_rate(emulator, camera):
     loop = tracking_loop(camera)
     cycle_tracking(loop, 2)

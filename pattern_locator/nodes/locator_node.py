@@ -149,8 +149,9 @@ PARAMETERS: Tuple[Param, ...] = (
           -90.0, 90.0, dynamic=True),
     Param('joint_state_max_age_s', 0.5, 'an image later than the last joint state by more '
           'than this has no head angles', 0.01, 10.0, dynamic=True),
-    Param('joint_state_wait_s', 0.05, 'wait this long for a joint state newer than the image '
-          'before using the newest one', 0.0, 1.0, dynamic=True),
+    Param('joint_state_wait_s', 0.15, 'wait this long for a joint state newer than the image '
+          'before holding the newest one (at least their period plus their delivery)', 0.0,
+          1.0, dynamic=True),
     Param('joint_state_warmup_s', 1.0, 'an image with no joint state history around it (at '
           'start, after the clock went back) waits this long for one', 0.0, 10.0,
           dynamic=True),

@@ -376,3 +376,45 @@ def test_the_covariance_terms_show_in_the_diagnostics_and_their_sizes_apply(driv
     late = [m for m in drive.received['bridged'] if seconds(m.header) > t + 0.5 + 1e-6]
     assert not late
     assert locator.poll() is None
+
+
+def test_an_image_waits_for_the_joint_state_after_it_rather_than_hold_the_one_before(drive):
+    # The driver reads the head at 10 Hz and changes its speed just after each
+    # reading; the reading after an image comes up to a period plus its
+    # delivery later. Held, the reading before this image is 3.6 deg of tilt
+    # off (the head slewing up at 60 deg/s): the base ~7 cm off, the
+    # covariance knowing nothing of it (no rate to hold with). Waited for,
+    # the two readings bracket the image and put the head where it was.
+    t = round(drive.next_t + 1.6, 6)
+    card = drive.next_card
+    pan, tilt = aimed_at(base_at(t), card)
+    rate = math.radians(60.0)
+    drive.publish_odometry(t + 0.1)
+    before = JointState()
+    before.header.stamp = stamp_of(t - 0.06)
+    before.name = ['camera_pan', 'camera_tilt']
+    before.position = [float(pan), float(tilt - 0.06 * rate)]
+    drive.joints.publish(before)
+    image = SCENE.render_still(SCENE.true_camera_pose(base_at(t), pan, tilt), CAMERA,
+                               seed=drive.frames)
+    drive.frames += 1
+    info = CameraInfo()
+    fill_camera_info(info, CAMERA)
+    msg = Image()
+    fill_msg(msg, image, 'bgr8')
+    for m in (info, msg):
+        m.header.stamp, m.header.frame_id = stamp_of(t), 'camera_optical_frame'
+    drive.spin(lambda: False, 0.02)
+    drive.info.publish(info)
+    drive.image.publish(msg)
+    # The next reading 90 ms later: beyond the old 50 ms wait.
+    drive.spin(lambda: False, 0.09)
+    after = JointState()
+    after.header.stamp = stamp_of(t + 0.04)
+    after.name = ['camera_pan', 'camera_tilt']
+    after.position = [float(pan), float(tilt + 0.04 * rate)]
+    drive.joints.publish(after)
+    assert drive.spin(lambda: drive.stamped('pose', t), 5.0), f'no pose at {t}'
+    p = drive.stamped('pose', t)[0].pose.position
+    error = np.linalg.norm([p.x, p.y, p.z] - in_room(base_at(t)).t)
+    assert error < 0.02, f'the base {100 * error:.1f} cm off: the joint state before was held'

@@ -11,8 +11,10 @@ and plays the robot's parts the way the nodes will, without ROS:
 * **the driver**: every 0.1 s it asks the position; the camera latches it
   at its next video field (0-20 ms later), the answer is stamped when it
   arrives less its wire time, late by a USB-serial adapter's latency timer
-  (0-16 ms) and the OS (:class:`JointTiming`); the angles are quantised to
-  the camera's units. Then it aims the head: the gaze planner's card from
+  (0-16 ms) and the OS (:class:`JointTiming`), and published at once
+  (``--publish-delay-ms``: later, as the driver that published after its
+  commands' ACKs, ~32 ms); the angles are quantised to the camera's units.
+  Then it aims the head: the gaze planner's card from
   the last fix carried forward by odometry (``OdomBridge``), the
   feed-forward rates that cancel the base's motion plus the driver's
   correction (``tracking.controller.wanted_rate``: the gain, fast slews),
@@ -27,7 +29,11 @@ and plays the robot's parts the way the nodes will, without ROS:
 * **the locator**: each frame (``--rate`` per second, motion blur and
   optionally interlace rendered by the sim) goes to ``RobotLocalizer``
   with the head's angles interpolated to the image's stamp from the joint
-  states that have arrived 50 ms after it (``JointStateBuffer``), the
+  states that have arrived (``JointStateBuffer``): 50 ms after the
+  exposure (the image's way to the locator) once a joint state stamped
+  after the image has come, else when the locator's ``joint_state_wait_s``
+  is up (``--joint-wait-ms``, the node's default 150; then the last one
+  is held), the
   odometry since the last fix and the base's twist (``OdomBuffer``;
   ``--no-odometry``: none, the gates' speed limits instead, no bridge);
 * **the truth**: the sim's base pose at each image's stamp and the head's
@@ -102,7 +108,9 @@ class JointTiming:
     answers; the answer's stamp (its arrival less the wire time) is late by
     a uniform ``usb_latency_s`` (an FTDI adapter's latency timer) and an
     exponential ``os_jitter_s``. Commands take effect ``command_latency_s``
-    (uniform within the range) after they are sent.
+    (uniform within the range) after they are sent. ``publish_s``: from
+    the answer's arrival to the joint state's publication (0: the driver
+    publishes it before its commands).
     """
 
     period_s: float = 0.1
@@ -111,6 +119,7 @@ class JointTiming:
     usb_latency_s: float = 0.016
     os_jitter_s: float = 0.001
     command_latency_s: Tuple[float, float] = (0.01, 0.03)
+    publish_s: float = 0.0
 
     def stamp_error_rms(self) -> float:
         """Return the RMS of (stamp - latch): the model's ``joint_stamp_sigma_s``."""
@@ -222,6 +231,9 @@ class DriveCoreConfig:
     driver: str = 'planner'               # 'planner' | 'target' (map-free, the locator's target)
     odometry: bool = True                 # the locator takes odometry (else speed limits)
     gaze: bool = True                     # the locator's target from the gaze planner
+    # The locator's joint_state_wait_s: how long an image waits for a joint
+    # state stamped after it before the last one is held.
+    joint_wait_s: float = 0.15
 
 
 def config_exposure(config: DriveCoreConfig) -> Exposure:
@@ -241,7 +253,7 @@ def _uncertainty(config: DriveCoreConfig) -> Optional[UncertaintyParameters]:
     # link's stamp error (the default timing's is the parameters' default).
     params = replace(params, exposure_s=exposure.exposure_s,
                      field_period_s=exposure.field_period_s if exposure.interlace else 0.0)
-    if config.timing != JointTiming():
+    if replace(config.timing, publish_s=0.0) != JointTiming():
         params = replace(params, joint_stamp_sigma_s=config.timing.stamp_error_rms())
     if config.as_hung:
         # The sim's as-hung errors (FloorWorld.as_hung: a shift uniform in a disc
@@ -311,7 +323,7 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
             tilt = round(tilt * TILT_UNITS_PER_RAD) / TILT_UNITS_PER_RAD
             stamp = latch + rng.uniform(0.0, timing.usb_latency_s) + rng.exponential(
                 timing.os_jitter_s)
-            pending.append((stamp + ANSWER_WIRE_S, stamp, pan, tilt))
+            pending.append((stamp + ANSWER_WIRE_S + timing.publish_s, stamp, pan, tilt))
             pending.sort()
             next_inquiry += timing.period_s + rng.uniform(-1.0, 1.0) * timing.period_jitter_s
             # The driver's cycle: decide on the reading that has just come back.
@@ -323,7 +335,7 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
                 current, zoom, search_dir = _control(
                     t + 0.03, sim_head, last_reading, bridge, odom, planner, head, building,
                     current, zoom, search_dir, zoom_table, pattern.card_size, timing, rng)
-        if t + 1e-9 >= next_frame + 0.05 + sim.exposure.exposure_s:
+        if _frame_due(t, next_frame, sim.exposure.exposure_s, joints, config.joint_wait_s):
             stamp = next_frame
             next_frame += 1.0 / config.frame_rate_hz
             camera = zoom_table.camera_at(zoom)
@@ -334,6 +346,23 @@ def run(config: DriveCoreConfig, progress: bool = False) -> List[FrameRecord]:
             if records[-1].target is not None:
                 target = records[-1]
     return records
+
+
+def _frame_due(t: float, stamp: float, exposure_s: float, joints: JointStateBuffer,
+               wait_s: float) -> bool:
+    """
+    Tell whether the locator takes the frame stamped ``stamp`` at ``t``.
+
+    As the node: 50 ms after the exposure (the image's way to the locator)
+    once a joint state stamped at or after the image has come, else when
+    its wait (``joint_state_wait_s``) is up, holding the last one.
+    """
+    arrived = stamp + exposure_s + 0.05
+    if t + 1e-9 < arrived:
+        return False
+    latest = joints.latest()
+    return (latest is not None and latest[0] >= stamp) or (
+        t + 1e-9 >= stamp + exposure_s + max(wait_s, 0.05))
 
 
 @functools.lru_cache(maxsize=4)
@@ -792,6 +821,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument('--usb-latency-ms', type=float, default=16.0,
                         help="the stamps' lateness, uniform up to this (default 16, an FTDI "
                              "adapter's latency timer); the model's joint_stamp_sigma_s follows")
+    parser.add_argument('--publish-delay-ms', type=float, default=0.0,
+                        help="from the answer's arrival to the joint state's publication "
+                             '(default 0; ~32: a driver publishing after its commands)')
+    parser.add_argument('--joint-wait-ms', type=float, default=150.0,
+                        help="the locator's joint_state_wait_s, ms (default 150; the last "
+                             'joint state is held after it)')
     parser.add_argument('--as-hung', action='store_true',
                         help='cards off their mapped pose (the map giving its std_dev)')
     parser.add_argument('--driver', choices=DRIVERS, default='planner',
@@ -841,20 +876,25 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         start = time.perf_counter()
         for seed in seeds:
             timing = replace(JointTiming(), period_s=1.0 / args.joint_hz,
-                             usb_latency_s=args.usb_latency_ms / 1000.0)
+                             usb_latency_s=args.usb_latency_ms / 1000.0,
+                             publish_s=args.publish_delay_ms / 1000.0)
             config = DriveCoreConfig(route=args.route, seconds=args.seconds,
                                      frame_rate_hz=args.rate, max_speed_m_s=args.max_speed,
                                      exposure=args.exposure, shutter_s=args.shutter,
                                      covariance=mode,
                                      as_hung=args.as_hung, seed=seed, timing=timing,
                                      driver=args.driver, odometry=not args.no_odometry,
-                                     gaze=not args.no_gaze)
+                                     gaze=not args.no_gaze,
+                                     joint_wait_s=args.joint_wait_ms / 1000.0)
             records.extend(run(config, progress=True))
         elapsed = time.perf_counter() - start
         summary = summarise(records)
         summaries[mode] = summary
         timing = ('' if (args.joint_hz, args.usb_latency_ms) == (10.0, 16.0) else
                   f', joint states {args.joint_hz:g} Hz late by <= {args.usb_latency_ms:g} ms')
+        if (args.publish_delay_ms, args.joint_wait_ms) != (0.0, 150.0):
+            timing += (f', joint states published {args.publish_delay_ms:g} ms after their '
+                       f'answer, waited for {args.joint_wait_ms:g} ms')
         title = (f'{args.route}, seeds {",".join(map(str, seeds))}, {args.rate:g} fps, '
                  f'<= {args.max_speed:g} m/s, {args.exposure}'
                  f'{"" if args.shutter is None else f", shutter {args.shutter:g} s"}{timing}'

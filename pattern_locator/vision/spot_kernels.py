@@ -31,6 +31,16 @@ import numpy as np
 from .card_kernels import _h_jacobian, _map_point, _median, bilinear as _bilinear
 
 _F32 = np.float32
+# The paper round a dot, between these many of its own radii (clear of its
+# blur and of the next dot of either ring, the marks' edges a minority),
+# is its white where the local white grid (a max filter) lies above it by
+# more than _FLANK: on the flank of a highlight (a glossy card under a
+# lamp) the grid's white is the brighter paper nearer the highlight, and
+# the paper round the dot then read as ink. Flat light leaves the two
+# within a few per cent, and nothing changes.
+_PAPER_RING = (1.6, 2.2)
+_FLANK = 0.08
+_MIN_PAPER_PIXELS = 12
 
 
 @numba.njit(cache=True, nogil=False)
@@ -306,12 +316,14 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     off = (scale - 1) / 2.0
     plane_x = np.empty((size, size), dtype=np.float32)
     plane_y = np.empty((size, size), dtype=np.float32)
+    paper = np.empty(size * size, dtype=np.uint8)
     for k in range(k_count):
         i = index[k]
         bx, by = base[k, 0], base[k, 1]
         # Darkness below the local white, less a floor that keeps paper
         # noise out.
-        level = white_level[i]
+        level = _paper_level(source, bx, by, size, axes, k, pred[k, 0], pred[k, 1],
+                             major[i] / scale, minor[i] / scale, white_level[i], paper)
         floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
         clear = level - floor
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
@@ -410,6 +422,45 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         spread[k, 1] = sxy / total * (scale * scale)
         spread[k, 2] = syy / total * (scale * scale)
     return pixels, in_image, raw, weight, cell, window, on_card, centres, top, spread
+
+
+@numba.njit(cache=True, nogil=False)
+def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, buffer):
+    """
+    Return a dot's white: the grid's, or the paper round the dot where it lies well below.
+
+    The paper: the upper quartile of the darkest channel over the ring between
+    ``_PAPER_RING`` of the dot's semi-axes (``major``, ``minor``, source
+    pixels, along ``axes[k]``) round (``c0``, ``c1``) in the window whose
+    origin is (``bx``, ``by``), within the image; ``buffer`` holds at
+    least ``size * size`` values.
+    """
+    h, w, channels = source.shape
+    ca, cb = _ellipse_origin(axes, k, c0, c1)
+    ia, ib = _inverse_squares(_PAPER_RING[0] * major, _PAPER_RING[0] * minor)
+    oa, ob = _inverse_squares(_PAPER_RING[1] * major, _PAPER_RING[1] * minor)
+    x0, x1, y0, y1 = _span(axes, k, c0, c1, _PAPER_RING[1] * major, _PAPER_RING[1] * minor,
+                           size)
+    count = 0
+    for y in range(y0, y1):
+        v = by + y
+        if v < 0 or v >= h:
+            continue
+        for x in range(x0, x1):
+            u = bx + x
+            if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
+                    or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
+                continue
+            darkest = np.uint8(255)
+            for ch in range(channels):
+                darkest = min(darkest, source[v, u, ch])
+            buffer[count] = darkest
+            count += 1
+    if count < _MIN_PAPER_PIXELS:
+        return grid_white
+    # The upper quartile: an object beside the dot darkens part of the ring.
+    ring = _F32(np.quantile(buffer[:count], 0.75))
+    return ring if ring < (_F32(1.0) - _F32(_FLANK)) * grid_white else grid_white
 
 
 @numba.njit(cache=True, nogil=False)

@@ -146,11 +146,19 @@ class Drive:
         """Publish odometry past ``t``, joint states around it, its camera_info and image."""
         self.publish_odometry(t + 0.1)
         for offset in (-0.05, 0.05):
-            joints = JointState()
-            joints.header.stamp = stamp_of(t + offset)
-            joints.name = ['camera_pan', 'camera_tilt']
-            joints.position = [float(pan), float(tilt)]
-            self.joints.publish(joints)
+            self.joint_state(t + offset, pan, tilt)
+        self.camera_frame(t, pan, tilt)
+
+    def joint_state(self, t: float, pan: float, tilt: float) -> None:
+        """Publish the head's angles stamped ``t``."""
+        joints = JointState()
+        joints.header.stamp = stamp_of(t)
+        joints.name = ['camera_pan', 'camera_tilt']
+        joints.position = [float(pan), float(tilt)]
+        self.joints.publish(joints)
+
+    def camera_frame(self, t: float, pan: float, tilt: float) -> None:
+        """Publish the camera_info and the image stamped ``t``, the head at ``pan``, ``tilt``."""
         image = SCENE.render_still(SCENE.true_camera_pose(base_at(t), pan, tilt), CAMERA,
                                    seed=self.frames)
         self.frames += 1
@@ -390,30 +398,11 @@ def test_an_image_waits_for_the_joint_state_after_it_rather_than_hold_the_one_be
     pan, tilt = aimed_at(base_at(t), card)
     rate = math.radians(60.0)
     drive.publish_odometry(t + 0.1)
-    before = JointState()
-    before.header.stamp = stamp_of(t - 0.06)
-    before.name = ['camera_pan', 'camera_tilt']
-    before.position = [float(pan), float(tilt - 0.06 * rate)]
-    drive.joints.publish(before)
-    image = SCENE.render_still(SCENE.true_camera_pose(base_at(t), pan, tilt), CAMERA,
-                               seed=drive.frames)
-    drive.frames += 1
-    info = CameraInfo()
-    fill_camera_info(info, CAMERA)
-    msg = Image()
-    fill_msg(msg, image, 'bgr8')
-    for m in (info, msg):
-        m.header.stamp, m.header.frame_id = stamp_of(t), 'camera_optical_frame'
-    drive.spin(lambda: False, 0.02)
-    drive.info.publish(info)
-    drive.image.publish(msg)
+    drive.joint_state(t - 0.06, pan, tilt - 0.06 * rate)
+    drive.camera_frame(t, pan, tilt)
     # The next reading 90 ms later: beyond the old 50 ms wait.
     drive.spin(lambda: False, 0.09)
-    after = JointState()
-    after.header.stamp = stamp_of(t + 0.04)
-    after.name = ['camera_pan', 'camera_tilt']
-    after.position = [float(pan), float(tilt + 0.04 * rate)]
-    drive.joints.publish(after)
+    drive.joint_state(t + 0.04, pan, tilt + 0.04 * rate)
     assert drive.spin(lambda: drive.stamped('pose', t), 5.0), f'no pose at {t}'
     p = drive.stamped('pose', t)[0].pose.position
     error = np.linalg.norm([p.x, p.y, p.z] - in_room(base_at(t)).t)

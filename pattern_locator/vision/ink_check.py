@@ -33,7 +33,7 @@ from .code_reading import ink_darkness, LETTERS
 from .detector import Detector
 from .detector_params import DetectorParams
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
-from ..errors import ImageError
+from ..errors import ConfigError, ImageError
 
 # A measured ink "matches" its configured one when the detector's nearest
 # configured ink is the same with at least this margin (code_reading's:
@@ -133,6 +133,16 @@ def measure_inks(images: Sequence[Tuple[str, np.ndarray]], config: PatternConfig
     card's inks clearly (other ids, uneven light).
     """
     code = config.encode(*ids.as_tuple())
+    absent = [letter for letter in LETTERS if letter not in code.centre + code.ring]
+    if absent:
+        example = _card_with_every_ink(config)
+        raise ConfigError(f'card floor {ids.floor} room {ids.room} card {ids.pattern} (code '
+                          f'{code}) has no {", ".join(absent)} dot: measure a card that shows '
+                          f'every ink'
+                          + (f', e.g. floor {example.floor} room {example.room} card '
+                             f'{example.pattern}' if example is not None else ''))
+    if not images:
+        raise ConfigError('measure_inks: no images given')
     detector = Detector(config, params)
     per_letter: dict = {letter: [] for letter in LETTERS}
     smallest = math.inf
@@ -163,6 +173,14 @@ def measure_inks(images: Sequence[Tuple[str, np.ndarray]], config: PatternConfig
                                config.ink_rgb(letter), _angle_deg(darkness, configured[k]),
                                LETTERS[read], float(margin), len(values), spread))
     return InkReport(code, tuple(inks), len(images), smallest)
+
+
+def _card_with_every_ink(config: PatternConfig) -> Optional[Ids]:
+    """Return the first ids whose card shows all four inks (None if no card does)."""
+    for ids, code in config.all_codes():
+        if set(code.centre + code.ring) == set(LETTERS):
+            return ids
+    return None
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:

@@ -15,7 +15,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 from pattern_locator.card.pattern import Ids, PatternConfig
-from pattern_locator.errors import ImageError
+from pattern_locator.errors import ConfigError, ImageError
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, ink_reflectance,
                                         printed_card_texture, render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel
@@ -143,3 +143,13 @@ def test_what_cannot_be_measured_is_refused_in_one_line(office_photo, change, wo
     with pytest.raises(ImageError, match=words) as err:
         measure_inks([('photo.png', image)], CFG, ids, camera)
     assert '\n' not in str(err.value) and 'photo.png' in str(err.value)
+
+
+def test_a_card_without_every_ink_is_refused_before_any_image_is_read():
+    code = next(code for _, code in CFG.all_codes() if set(code.centre + code.ring) == set('KRB'))
+    ids = CFG.decode(code)
+    with pytest.raises(ConfigError, match='has no G dot: measure a card that shows every ink, '
+                                          'e.g. floor'):
+        measure_inks([('never read', None)], CFG, ids)
+    with pytest.raises(ConfigError, match='no images'):
+        measure_inks([], CFG, IDS)

@@ -288,8 +288,9 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     ``major``, ``minor`` (image pixels) and ``linv`` (metres per image
     pixel) are per spot, ``spots`` indexing the layout's ``owner`` raster
     (``half``, ``resolution``: its geometry). ``white_level`` (float32,
-    per spot) is the image's local white at the spot's predicted centre;
-    ``quiet`` is the source's noise.
+    per spot) is the image's local white at the spot's predicted centre
+    (the paper round the spot instead where that is well below it:
+    :func:`_paper_level`); ``quiet`` is the source's noise.
 
     Writes the centre (image pixels), the tests, the peak darkness and the
     area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at

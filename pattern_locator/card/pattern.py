@@ -392,10 +392,11 @@ def _known_keys(mapping: dict, allowed: Tuple[str, ...], where: str) -> None:
                           f'{", ".join(allowed)})')
 
 
-def _colour_table(data: dict, key: str, source: str) -> Tuple[Tuple[str, Tuple[int, ...]], ...]:
-    table = data[key]
+def hex_colours(table: Dict[str, str], what: str = 'colours', source: str = 'pattern'
+                ) -> Tuple[Tuple[str, Tuple[int, int, int]], ...]:
+    """Return a ``{letter: '#rrggbb'}`` table as ``colours_rgb``/``inks_rgb`` hold it."""
     if not isinstance(table, dict):
-        raise ConfigError(f'{source}: {key} must map K, R, G, B to "#rrggbb"')
+        raise ConfigError(f'{source}: {what} must map K, R, G, B to "#rrggbb"')
     return tuple((str(k), _parse_hex(k, v)) for k, v in table.items())
 
 
@@ -416,9 +417,9 @@ def pattern_config_from_dict(data: dict, source: str = 'pattern') -> PatternConf
     except (TypeError, ValueError) as exc:
         raise ConfigError(f'{source}: geometry values must be numbers in metres ({exc})')
     if 'colours' in data:
-        kwargs['colours_rgb'] = _colour_table(data, 'colours', source)
+        kwargs['colours_rgb'] = hex_colours(data['colours'], 'colours', source)
     if data.get('inks') is not None:
-        kwargs['inks_rgb'] = _colour_table(data, 'inks', source)
+        kwargs['inks_rgb'] = hex_colours(data['inks'], 'inks', source)
     code = data.get('code', {}) or {}
     if not isinstance(code, dict):
         raise ConfigError(f'{source}: code must be a mapping')

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from ..card.pattern import Code, Ids, PatternConfig, srgb_to_linear
+from ..card.printable import Circle, layout_card, MM_PER_INCH, png_image
 from ..errors import CodeError, ConfigError, ImageError
 from ..vision.camera import CameraModel
 from ..vision.geometry import look_at, Pose, rodrigues
@@ -241,7 +242,6 @@ def printed_card_texture(config: PatternConfig, ids: Ids, dpi: float = 150.0,
     ``inks`` (sRGB per letter) prints the dots as a printer that makes
     those of the configured colours would (default: the colours).
     """
-    from ..card.printable import Circle, layout_card, MM_PER_INCH, png_image
     printer = config if inks is None else replace(config, colours_rgb=tuple(inks))
     sheet = layout_card(printer, ids, 'a3')[0]
     image = png_image(sheet, dpi=dpi)

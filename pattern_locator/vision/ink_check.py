@@ -29,6 +29,7 @@ import numpy as np
 
 from . import card_kernels
 from .camera import CameraModel
+from .cards import apply_h
 from .code_reading import ink_darkness, LETTERS
 from .detector import Detector
 from .detector_params import DetectorParams
@@ -259,8 +260,7 @@ def _find_card(name: str, image: np.ndarray, camera: Optional[CameraModel],
 
 def _plane_to_pixels(H: np.ndarray, camera: Optional[CameraModel]):
     def to_px(xy: np.ndarray) -> np.ndarray:
-        p = np.column_stack([xy, np.ones(len(xy))]) @ H.T
-        px = p[:, :2] / p[:, 2:3]
+        px = apply_h(H, xy)
         return camera.distort_pixels(px) if camera is not None else px
     return to_px
 

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
-from pattern_locator.card.pattern import Ids, PatternConfig
+from pattern_locator.card.pattern import hex_colours, Ids, PatternConfig
 from pattern_locator.errors import ConfigError, ImageError
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, ink_reflectance,
                                         printed_card_texture, render_scene, RenderOptions)
@@ -29,13 +29,9 @@ VGA = CameraModel.from_focal(640, 480, 1000.0)
 IDS = Ids(5, 42, 7)
 
 
-def _hex_table(table):
-    return tuple((k, tuple(int(v[i:i + 2], 16) for i in (1, 3, 5))) for k, v in table.items())
-
-
 # What printers made of the configured colours (sRGB as printed).
-OFFICE = _hex_table({'K': '#231f20', 'R': '#ed1c24', 'G': '#00a651', 'B': '#2e3192'})
-ODD = _hex_table({'K': '#000000', 'R': '#f05a28', 'G': '#00a99d', 'B': '#5b2c8f'})
+OFFICE = hex_colours({'K': '#231f20', 'R': '#ed1c24', 'G': '#00a651', 'B': '#2e3192'})
+ODD = hex_colours({'K': '#000000', 'R': '#f05a28', 'G': '#00a99d', 'B': '#5b2c8f'})
 
 
 def printed_sheet(inks, ids=IDS):

@@ -12,13 +12,13 @@ printer, as the stress bench counts them.
 """
 
 from dataclasses import replace
-from typing import Dict, List, Sequence, Tuple
+from typing import List, Sequence, Tuple
 
 import numpy as np
 
 from . import stress
 from .bench import bench_cameras
-from ..card.pattern import Ids, load_pattern_config, PatternConfig
+from ..card.pattern import hex_colours, Ids, load_pattern_config, PatternConfig
 from ..sim.render import (card_pose_facing, CardPlacement, printed_card_texture, render_scene,
                           RenderOptions)
 from ..vision.camera import CameraModel
@@ -26,10 +26,6 @@ from ..vision.ink_check import InkReport, measure_inks
 from ..vision.locate import CardLocator
 
 Inks = Tuple[Tuple[str, Tuple[int, int, int]], ...]
-
-
-def _hex_inks(table: Dict[str, str]) -> Inks:
-    return tuple((k, tuple(int(v[i:i + 2], 16) for i in (1, 3, 5))) for k, v in table.items())
 
 
 def _mixed(inks: Inks, weight: float, towards: float) -> Inks:
@@ -43,13 +39,13 @@ def printers(config: PatternConfig) -> List[Tuple[str, Inks]]:
         ('as configured', config.colours_rgb),
         # The process colours an office (CMYK) printer makes of red, green and
         # blue: its blue is cyan and magenta, a dark violet.
-        ('office printer', _hex_inks({'K': '#231f20', 'R': '#ed1c24', 'G': '#00a651',
-                                     'B': '#2e3192'})),
+        ('office printer', hex_colours({'K': '#231f20', 'R': '#ed1c24', 'G': '#00a651',
+                                        'B': '#2e3192'})),
         ('dark inks', _mixed(config.colours_rgb, 0.3, 0.0)),
         ('faded inks', _mixed(config.colours_rgb, 0.35, 255.0)),
         # A printer far off: its red orange, its green teal, its blue violet.
-        ('odd printer', _hex_inks({'K': '#000000', 'R': '#f05a28', 'G': '#00a99d',
-                                  'B': '#5b2c8f'})),
+        ('odd printer', hex_colours({'K': '#000000', 'R': '#f05a28', 'G': '#00a99d',
+                                     'B': '#5b2c8f'})),
     ]
 
 
@@ -73,10 +69,9 @@ def read_counts(frames: Sequence[stress.Frame], printed: PatternConfig, locator:
     for frame in frames:
         camera = cameras[frame.camera_name]
         image = stress.render_frame(frame, camera, printed, 'dots')
-        ids = [card.detection.ids for card in locator.locate(image, camera)
-               if card.detection.ids is not None]
-        found += frame.ids in ids
-        wrong += sum(1 for i in ids if i != frame.ids)
+        result = stress.score_located(locator.locate(image, camera), frame)
+        found += result.found
+        wrong += result.wrong_ids
     return found, wrong
 
 

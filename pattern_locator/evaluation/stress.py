@@ -62,7 +62,7 @@ from ..nodes.image_codec import decode_image, encode_image
 from ..sim.render import (_in_polygon, BitmapCardTexture, card_pose_facing, CardPlacement,
                           DotCardTexture, MirroredTexture, Occluder, render_scene, RenderOptions)
 from ..vision.camera import CameraModel
-from ..vision.locate import CardLocator
+from ..vision.locate import CardLocator, LocatedCard
 
 if TYPE_CHECKING:      # stress_follow imports this module
     from .stress_follow import FollowCounts
@@ -450,12 +450,9 @@ def peak_extra_mb(run: Callable[[], object]) -> float:
     return max(0.0, (after[1] - before[0]) / 1024.0)
 
 
-def _run_dots(locator: CardLocator, image: np.ndarray, camera: CameraModel,
-              frame: Frame) -> Result:
-    start = time.perf_counter()
-    located = locator.locate(image, camera)
-    elapsed = (time.perf_counter() - start) * 1000.0
-    out = Result(time_ms=elapsed)
+def score_located(located: Sequence[LocatedCard], frame: Frame) -> Result:
+    """Return what our locator's cards on ``frame`` were: found, wrong ids, among candidates."""
+    out = Result()
     for card in located:
         if card.detection.ids is None:
             out.among_candidates |= frame.expected and any(
@@ -465,6 +462,16 @@ def _run_dots(locator: CardLocator, image: np.ndarray, camera: CameraModel,
             out.wrong_ids += 1
         elif card.T_camera_pattern is not None:
             out.found = True
+    return out
+
+
+def _run_dots(locator: CardLocator, image: np.ndarray, camera: CameraModel,
+              frame: Frame) -> Result:
+    start = time.perf_counter()
+    located = locator.locate(image, camera)
+    elapsed = (time.perf_counter() - start) * 1000.0
+    out = score_located(located, frame)
+    out.time_ms = elapsed
     out.peak_mb = peak_extra_mb(lambda: locator.locate(image, camera))
     return out
 

@@ -465,30 +465,34 @@ def score_located(located: Sequence[LocatedCard], frame: Frame) -> Result:
     return out
 
 
+def _measured(run: Callable[[], object], score: Callable[[object], Result]) -> Result:
+    """Score ``run()``'s output, with its time and (a second run) its peak extra memory."""
+    start = time.perf_counter()
+    output = run()
+    elapsed = (time.perf_counter() - start) * 1000.0
+    out = score(output)
+    out.time_ms = elapsed
+    out.peak_mb = peak_extra_mb(run)
+    return out
+
+
 def _run_dots(locator: CardLocator, image: np.ndarray, camera: CameraModel,
               frame: Frame) -> Result:
-    start = time.perf_counter()
-    located = locator.locate(image, camera)
-    elapsed = (time.perf_counter() - start) * 1000.0
-    out = score_located(located, frame)
-    out.time_ms = elapsed
-    out.peak_mb = peak_extra_mb(lambda: locator.locate(image, camera))
-    return out
+    return _measured(lambda: locator.locate(image, camera),
+                     lambda located: score_located(located, frame))
 
 
 def _run_april(april: AprilTagLocator, image: np.ndarray, camera: CameraModel,
                frame: Frame) -> Result:
-    start = time.perf_counter()
-    found = april.detect(image, camera)
-    elapsed = (time.perf_counter() - start) * 1000.0
-    out = Result(time_ms=elapsed)
-    for det in found:
-        if not frame.expected or det.tag_id != frame.tag_id:
-            out.wrong_ids += 1
-        else:
-            out.found = True
-    out.peak_mb = peak_extra_mb(lambda: april.detect(image, camera))
-    return out
+    def score(found) -> Result:
+        out = Result()
+        for det in found:
+            if not frame.expected or det.tag_id != frame.tag_id:
+                out.wrong_ids += 1
+            else:
+                out.found = True
+        return out
+    return _measured(lambda: april.detect(image, camera), score)
 
 
 def run_frames(frames: Sequence[Frame], config: PatternConfig, progress: bool = True

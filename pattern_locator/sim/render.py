@@ -196,6 +196,40 @@ class MirroredTexture:
         return out
 
 
+class GlossyTexture:
+    """
+    A glossy or laminated card under a lamp: the lamp's highlight on it.
+
+    A specular highlight is light the surface's gloss reflects, added to
+    what its print reflects and the same over ink and paper: ``level``
+    (reflectance units, the paper is about 0.85) at its peak, falling off as
+    a Gaussian of ``sigma`` metres round ``centre`` (card-frame metres). It
+    is lit as the print is, and the sensor clips it (rendered through the
+    optics first, as a real highlight's bloom is).
+    """
+
+    def __init__(self, texture: CardTexture, centre: Tuple[float, float], sigma: float,
+                 level: float) -> None:
+        if not (_finite(sigma) and sigma > 0.0):
+            raise ConfigError(f'render: glare sigma must be positive metres, got {sigma!r}')
+        if not (_finite(level) and level >= 0.0):
+            raise ConfigError(f'render: glare level must be >= 0, got {level!r}')
+        if not (len(centre) == 2 and all(_finite(c) for c in centre)):
+            raise ConfigError(f'render: glare centre must be two finite numbers, got {centre!r}')
+        self.texture = texture
+        self.size = float(texture.size)
+        self.centre = (float(centre[0]), float(centre[1]))
+        self.sigma = float(sigma)
+        self.level = float(level)
+
+    def reflectance(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 3) linear RGB reflectance at (N, 2) card-frame points (metres)."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        d2 = (xy[:, 0] - self.centre[0]) ** 2 + (xy[:, 1] - self.centre[1]) ** 2
+        gloss = self.level * np.exp(-d2 / (2.0 * self.sigma ** 2))
+        return self.texture.reflectance(xy) + gloss[:, None]
+
+
 class BitmapCardTexture:
     """
     A bitmap covering the whole card (AprilTag, ArUco...), nearest-neighbour sampled.

@@ -17,12 +17,48 @@ CONFIG = load_pattern_config()
 def test_every_condition_of_the_issue_is_a_row():
     names = set(stress.CONDITIONS)
     for needed in ('textures', 'dark noisy', 'photos', 'chromatic', 'mirror', 'dim', 'blur',
-                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer', 'mottled'):
+                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer', 'mottled', 'glare'):
         assert needed in names
     lights = [n for n in stress.CONDITIONS if n.startswith('light ')]
     assert len(lights) >= 13 and {'light magenta', 'light red wall'} <= set(lights)
     gains = np.array([g for _, g in stress.LIGHTS])
     assert gains.min() >= 0.7 and gains.max() <= 1.4
+
+
+def test_glare_frames_put_the_same_highlight_on_both_cards():
+    frames = stress.make_frames(CONFIG, 2, 4, ['glare'])
+    outer = CONFIG.ring_radii[0] + CONFIG.ring_dot_radius
+    camera = bench_cameras()[frames[0].camera_name]
+    for f in frames:
+        x, y, sigma, level = f.glare
+        assert max(abs(x), abs(y)) <= 0.6 * outer and 0.1 * outer <= sigma <= 0.6 * outer
+        assert 0.05 <= level <= 1.0
+    f = frames[0]
+    for marker in ('dots', 'apriltag'):
+        shiny = stress.render_frame(f, camera, CONFIG, marker).astype(float)
+        matte = stress.render_frame(dataclasses.replace(f, glare=None), camera, CONFIG,
+                                    marker).astype(float)
+        peak = stress._card_pose(f, camera)
+        x, y = f.glare[:2]
+        u, v = np.rint(camera.project((peak.R @ [x, y, 0.0] + peak.t)[None])[0]).astype(int)
+        assert shiny[v, u].mean() > matte[v, u].mean() + 5
+        assert np.abs(shiny[:8, :8] - matte[:8, :8]).max() == 0
+
+
+def test_poses_are_scored_against_the_truth():
+    frame = stress.make_frames(CONFIG, 1, 4, ['plain'])[0]
+    camera = bench_cameras()[frame.camera_name]
+    locator = stress.CardLocator(CONFIG)
+    truth = stress.camera_position(frame, camera)
+    result = stress.score_located(locator.locate(stress.render_frame(
+        frame, camera, CONFIG, 'dots'), camera), frame, truth)
+    assert result.found and result.error_cm < 2.0 and result.sigmas < 4.0
+    # A truth 10 cm off is many sigmas off.
+    far_off = stress.score_located(locator.locate(stress.render_frame(
+        frame, camera, CONFIG, 'dots'), camera), frame, truth + [0.1, 0.0, 0.0])
+    assert far_off.error_cm > 8.0 and far_off.sigmas > 10.0
+    table = stress.pose_table({'plain': stress.Row('plain', [frame], [result])})
+    assert re.search(r'plain\s+1\s+\d', table) and 'all conditions' in table
 
 
 def test_raw_encodings_go_through_the_node_decoder():

@@ -6,8 +6,8 @@ import numpy as np
 from pattern_locator.card.pattern import Code, PatternConfig
 from pattern_locator.errors import CodeError, ConfigError, ImageError
 from pattern_locator.sim.render import (BitmapCardTexture, card_pose_facing, CardPlacement,
-                                        DotCardTexture, ink_reflectance, MirroredTexture, Occluder,
-                                        render_scene, RenderOptions)
+                                        DotCardTexture, GlossyTexture, ink_reflectance,
+                                        MirroredTexture, Occluder, render_scene, RenderOptions)
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.geometry import Pose
 import pytest
@@ -360,6 +360,24 @@ def test_handedness_marks_are_black_where_the_config_puts_them_and_a_mirror_move
         MARKED, CODE.mirrored()).reflectance(points))
 
 
+def test_a_glossy_cards_highlight_adds_the_same_light_over_ink_and_paper():
+    texture = DotCardTexture(CFG, CODE)
+    glossy = GlossyTexture(texture, (0.04, 0.0), 0.03, 0.6)
+    points = np.vstack([CFG.model_points()[:, :2], [[0.04, 0.0], [0.14, 0.14]]])
+    added = glossy.reflectance(points) - texture.reflectance(points)
+    d2 = np.sum((points - [0.04, 0.0]) ** 2, axis=1)
+    assert np.allclose(added, (0.6 * np.exp(-d2 / (2 * 0.03 ** 2)))[:, None])
+    # Its peak, far from it nothing; rendered, the sensor clips the peak.
+    assert np.isclose(added[-2, 0], 0.6) and np.all(added[-1] < 1e-6)
+    pose = frontal_pose()
+    plain = render_scene(CAMERA, [CardPlacement(pose, texture, CODE, CFG)]).image
+    shiny = render_scene(CAMERA, [CardPlacement(pose, glossy, CODE, CFG)]).image
+    peak = CAMERA.project((pose.R @ [0.04, 0.0, 0.0] + pose.t)[None])[0]
+    u, v = int(round(peak[0])), int(round(peak[1]))
+    assert shiny[v, u].min() == 255 and plain[v, u].max() < 250
+    assert np.array_equal(shiny[:20, :20], plain[:20, :20])
+
+
 # Backgrounds, colour optics, sensor and video ------------------------------------------
 
 @pytest.mark.parametrize('kind', ['texture', 'night', 'photo'])
@@ -453,6 +471,12 @@ def test_bad_inputs_raise_package_errors():
         DotCardTexture(CFG, Code('X', 'KRGBRGBR'))
     with pytest.raises(ConfigError, match='contrast'):
         MirroredTexture(DotCardTexture(CFG, CODE), contrast=0.0)
+    for centre, sigma, level, what in (((0.0, 0.0), 0.0, 0.5, 'sigma'),
+                                       ((0.0, 0.0), 0.05, -0.1, 'level'),
+                                       ((0.0, math.nan), 0.05, 0.5, 'centre'),
+                                       ((0.0,), 0.05, 0.5, 'centre')):
+        with pytest.raises(ConfigError, match=what):
+            GlossyTexture(DotCardTexture(CFG, CODE), centre, sigma, level)
     with pytest.raises(ConfigError, match='view_angle'):
         card_pose_facing(1.0, 90.0, 0.0)
     with pytest.raises(ConfigError, match='camera'):

@@ -251,6 +251,7 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
         0.25 * max(h, w), _DECIMATED_FROM, spots, np.ascontiguousarray(plane_xy),
         layout.owner, layout.half, layout.resolution, dot_image.white, dot_image.grid_step,
         float(paper.sigma), np.nan if paper.quiet is None else float(paper.quiet),
+        float(params.gamma),
         float(params.min_window_darkness if min_darkness is None else min_darkness),
         float(core_margin), bool(refine), int(min_valid), colour,
         _colour_table(paper.colour, params.gamma) if colour else _NO_TABLE,
@@ -290,7 +291,12 @@ _NO_TABLE = np.zeros((256, 3), dtype=np.float32)
 # peak (3x3 mean) is taken where the spot should be: a spot that is not
 # there drifts off towards whatever is dark nearby. The noise of the
 # decimated image is the image's over the scale (it averages scale^2
-# pixels).
+# pixels). Where the paper round the spot (its own part of the plane)
+# tilts clearly, as on a glossy card's highlight, the darkness is taken
+# below a plane fitted to that paper and in linear light, where the
+# highlight's light, added to ink and paper alike, cancels: below a level
+# white in the camera's encoding, a dot is darker where less light is
+# added, and its centroid moves there.
 #
 # Blur, as a covariance (2x2, image pixels^2) from the dots' spread: a
 # sharp ellipse of semi-axes a, b has second moments a^2/4, b^2/4 along its
@@ -333,8 +339,15 @@ _NO_TABLE = np.zeros((256, 3), dtype=np.float32)
 # is dark in: somewhere else for each ink, which the homography would take
 # for error. The card's shifts (red and blue against green, the median
 # over the dots dark in both) tell each dot's offset, which is taken away.
-# That moves centres only; the colours of dots partly covered by an object
-# (_uncovered_part, after the call) read and write colours only.
+# The offset is not the mean of its dark channels' shifts: the darkest
+# channel is darker where the darker channel's image is (a green dot, dark
+# in red and less in blue, lies towards red). Shifted by more than a
+# quarter of a pixel, a dot big enough for its window to hold every
+# channel's image is put at its dark channels' own centroids, each less
+# its shift; a smaller one moves by its channels' shifts weighted by
+# their darkness in the camera's encoding. That moves centres only; the
+# colours of dots partly covered by an object (_uncovered_part, after the
+# call) read and write colours only.
 
 
 def _uncovered_part(g: _Windows, dark: np.ndarray, major: np.ndarray, minor: np.ndarray,

@@ -41,6 +41,36 @@ _F32 = np.float32
 _PAPER_RING = (1.6, 2.2)
 _FLANK = 0.08
 _MIN_PAPER_PIXELS = 12
+# A highlight's flank also tilts the paper across a dot, and a dot's
+# darkness below a level white is then heavier on its darker side: its
+# centroid moves towards it (a tenth of a pixel where the paper changes by
+# a per cent across the dot, half a pixel at ten: on a glossy card, poses
+# whose covariance did not cover their error). Where a plane fitted to the
+# paper ring changes by more than _TILT of its level across the dot (and
+# by more than _TILT_NOISE times the noise) and the paper lies on it, the
+# dot's darkness is taken below the plane (:func:`_paper_tilt`). Samples
+# more than _TILT_OUTLIER of the level below a first fit (an object, a
+# neighbour's blur) are left out of the second. Dots under
+# _TILT_MIN_SEMI_AXIS source pixels keep a level white: their rings hold
+# their neighbours' blur.
+_TILT = 0.02
+_TILT_NOISE = 2.0
+_TILT_FIT = 0.015
+_TILT_OUTLIER = 0.06
+_TILT_MIN_SEMI_AXIS = 2.5
+# Colour channels shifted against each other (a cheap lens, composite
+# video): a dot's darkest channel is dark where any of its dark channels'
+# images is, darker where the darkest ink channel's is, so its centroid
+# lies nearer that channel's image than the channels' mean (a green dot,
+# dark in red and less in blue, 0.14-0.19 px towards red per pixel of
+# shift: far near-frontal poses 10-20 cm and 8 sigmas off). Beyond this
+# shift (pixels), each dot's centre is its channels' own centroids, each
+# less its shift, where the dot is big enough that its window holds
+# every channel's image whole: a semi-minor axis of _OWN_CHANNELS_SIZE
+# shifts (smaller dots, cut, came out up to 0.6 px off).
+_OWN_CHANNELS_FROM = 0.25
+_OWN_CHANNELS_SIZE = 2.5
+_TILT_SURE = 25.0
 
 
 @numba.njit(cache=True, nogil=False)
@@ -274,7 +304,7 @@ def windows(index, scale, predicted, axes, semi, inverse):
 
 @numba.njit(cache=True, nogil=False)
 def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
-               owner, half, resolution, major, minor, linv, white_level, quiet,
+               owner, half, resolution, major, minor, linv, white_level, quiet, gamma,
                core_margin, min_darkness, points, valid, peak, area, inside):
     """
     Gather each window's pixels, take the first, generous centroid and test the dots.
@@ -290,7 +320,8 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     (``half``, ``resolution``: its geometry). ``white_level`` (float32,
     per spot) is the image's local white at the spot's predicted centre
     (the paper round the spot instead where that is well below it:
-    :func:`_paper_level`); ``quiet`` is the source's noise.
+    :func:`_paper_level`, which also tilts it with the paper there);
+    ``quiet`` is the source's noise; ``gamma`` the camera's encoding.
 
     Writes the centre (image pixels), the tests, the peak darkness and the
     area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
@@ -323,12 +354,23 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         bx, by = base[k, 0], base[k, 1]
         # Darkness below the local white, less a floor that keeps paper
         # noise out.
-        level = _paper_level(source, bx, by, size, axes, k, pred[k, 0], pred[k, 1],
-                             major[i] / scale, minor[i] / scale, white_level[i], paper)
-        floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
-        clear = level - floor
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
         qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
+        level, tilt_x, tilt_y = _paper_level(
+            source, bx, by, size, axes, k, pred[k, 0], pred[k, 1], major[i] / scale,
+            minor[i] / scale, white_level[i], quiet, paper, to_plane, qx0, qy0, owner,
+            spots[i], half32, resolution32)
+        floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
+        clear = level - floor
+        # A tilted paper (a highlight's flank): its light is added to ink
+        # and paper alike, which cancels in linear light, not in the
+        # camera's encoding (a dot would be darker where less is added). So
+        # the darkness is linear there, scaled to match the encoded one for
+        # black ink (and near the white, gamma times it: the floor too).
+        tilted = tilt_x != 0.0 or tilt_y != 0.0
+        gx, gy = _F32(tilt_x), _F32(tilt_y)
+        to_linear = _F32(level / _linear(level, gamma)) if tilted else _F32(1.0)
+        floor_linear = _F32(gamma) * floor
         # On the card, inside its edge by two image pixels...
         room_x = _F32(half - 2.0 * np.hypot(linv[i, 0, 0], linv[i, 0, 1]))
         room_y = _F32(half - 2.0 * np.hypot(linv[i, 1, 0], linv[i, 1, 1]))
@@ -348,7 +390,12 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
                     darkest = min(darkest, p)
                 seen = (u >= 0) & (u < w) & (v >= 0) & (v < h)
                 in_image[k, y, x] = seen
-                r = max(clear - _F32(darkest), _F32(0.0))
+                if tilted:
+                    white_here = level + gx * (_F32(x) - ax0) + gy * (_F32(y) - ay0)
+                    r = max(to_linear * (_linear(white_here, gamma) - _linear(darkest, gamma))
+                            - floor_linear, _F32(0.0))
+                else:
+                    r = max(clear - _F32(darkest), _F32(0.0))
                 raw[k, y, x] = r if seen else _F32(0.0)
                 qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
                 plane_x[y, x] = qx
@@ -426,15 +473,23 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
 
 
 @numba.njit(cache=True, nogil=False)
-def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, buffer):
+def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, quiet,
+                 buffer, to_plane, qx0, qy0, owner, spot, half, resolution):
     """
-    Return a dot's white: the grid's, or the paper round the dot where it lies well below.
+    Return a dot's white at its centre and the paper's tilt: ``(level, gx, gy)``.
 
-    The paper: the upper quartile of the darkest channel over the ring between
-    ``_PAPER_RING`` of the dot's semi-axes (``major``, ``minor``, source
-    pixels, along ``axes[k]``) round (``c0``, ``c1``) in the window whose
-    origin is (``bx``, ``by``), within the image; ``buffer`` holds at
-    least ``size * size`` values.
+    The paper: the darkest channel over the ring between ``_PAPER_RING`` of
+    the dot's semi-axes (``major``, ``minor``, source pixels, along
+    ``axes[k]``) round (``c0``, ``c1``) in the window whose origin is
+    (``bx``, ``by``), within the image; ``buffer`` holds at least ``size *
+    size`` values; ``quiet`` is the source's noise. Where a plane fits the
+    part of that paper that is the dot's own (``owner``'s cell ``spot``,
+    plane positions from ``to_plane``, window point (``c0``, ``c1``) at
+    (``qx0``, ``qy0``): not a neighbour's blur) and tilts clearly
+    (:func:`_paper_tilt`), the plane: its value at the centre and its
+    slopes (grey levels per source pixel, x and y). Otherwise no tilt, and
+    the grid's white, or the paper's upper quartile where that lies more
+    than ``_FLANK`` below it.
     """
     h, w, channels = source.shape
     ca, cb = _ellipse_origin(axes, k, c0, c1)
@@ -461,15 +516,113 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
             count += 1
             bright += _F32(darkest) >= below
     if count < _MIN_PAPER_PIXELS:
-        return grid_white
+        return grid_white, 0.0, 0.0
+    if minor >= _TILT_MIN_SEMI_AXIS:
+        tilted, a, gx, gy = _paper_tilt(source, bx, by, axes, k, c0, c1, major, quiet,
+                                        ca, cb, ia, ib, oa, ob, x0, x1, y0, y1, to_plane,
+                                        qx0, qy0, owner, spot, half, resolution)
+        if tilted:
+            return _F32(a), gx, gy
     # The upper quartile (numpy's, interpolated between the sorted values
     # at and after 0.75 (count - 1)): an object beside the dot darkens part
     # of the ring. When both those values are at least `below` (the usual
     # case, flat light), so is the quartile: no sort.
     if count - bright <= int(0.75 * (count - 1)):
-        return grid_white
+        return grid_white, 0.0, 0.0
     ring = _F32(np.quantile(buffer[:count], 0.75))
-    return ring if ring < below else grid_white
+    return (ring if ring < below else grid_white), 0.0, 0.0
+
+
+@numba.njit(cache=True, nogil=False)
+def _paper_tilt(source, bx, by, axes, k, c0, c1, major, quiet, ca, cb, ia, ib, oa, ob,
+                x0, x1, y0, y1, to_plane, qx0, qy0, owner, spot, half, resolution):
+    """
+    Fit a plane to the paper ring of :func:`_paper_level`: ``(tilted, a, gx, gy)``.
+
+    Fitted twice, the second time without the samples more than
+    ``_TILT_OUTLIER`` of the level below the first plane (an object, a
+    neighbour's blur). Tilted when the plane changes by more than
+    ``_TILT`` of its level across the dot (and by ``_TILT_NOISE`` times the
+    noise), and the paper kept lies on it (residuals' RMS at most
+    ``_TILT_FIT`` of the level, or twice the noise): a highlight's smooth
+    flank, not an object's edge.
+    """
+    h, w, channels = source.shape
+    a, gx, gy = 0.0, 0.0, 0.0
+    for rounds in range(2):
+        floor = _TILT_OUTLIER * a
+        n = 0
+        sxx = sxy = syy = sx = sy = 0.0
+        sv = sxv = syv = svv = 0.0
+        for y in range(y0, y1):
+            v = by + y
+            if v < 0 or v >= h:
+                continue
+            for x in range(x0, x1):
+                u = bx + x
+                if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
+                        or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
+                    continue
+                qx, qy = _plane_at(to_plane, k, x, y, _F32(c0), _F32(c1), qx0, qy0)
+                if not _owned(owner, spot, qx, qy, half, resolution):
+                    continue
+                darkest = np.uint8(255)
+                for ch in range(channels):
+                    darkest = min(darkest, source[v, u, ch])
+                dx, dy, value = x - c0, y - c1, np.float64(darkest)
+                if rounds == 1 and value < a + gx * dx + gy * dy - floor:
+                    continue
+                n += 1
+                sx += dx
+                sy += dy
+                sxx += dx * dx
+                sxy += dx * dy
+                syy += dy * dy
+                sv += value
+                sxv += dx * value
+                syv += dy * value
+                svv += value * value
+        if n < _MIN_PAPER_PIXELS:
+            return False, 0.0, 0.0, 0.0
+        ok, a, gx, gy = _plane(n, sx, sy, sxx, sxy, syy, sv, sxv, syv)
+        if not (ok and a > 0.0):
+            return False, 0.0, 0.0, 0.0
+    # The residuals' sum of squares from the sums: sum (v - a - gx dx - gy dy)^2.
+    rss = (svv - 2.0 * (a * sv + gx * sxv + gy * syv) + a * a * n + gx * gx * sxx
+           + gy * gy * syy + 2.0 * (a * gx * sx + a * gy * sy + gx * gy * sxy))
+    rms = np.sqrt(max(rss, 0.0) / n)
+    change = np.hypot(gx, gy) * 2.0 * major
+    # The slope against its own uncertainty (chi-square of the two slopes,
+    # the residuals' RMS for the noise): a plane that noise or a
+    # neighbour's blur tilts by chance is not a highlight.
+    mx, my = sx / n, sy / n
+    cxx, cxy, cyy = sxx - n * mx * mx, sxy - n * mx * my, syy - n * my * my
+    sure = (gx * gx * cxx + 2.0 * gx * gy * cxy + gy * gy * cyy) \
+        > _TILT_SURE * max(rms, 0.5 * quiet, 0.5) ** 2
+    tilted = change > _TILT * a and change > _TILT_NOISE * quiet and sure \
+        and rms <= max(_TILT_FIT * a, 2.0 * quiet)
+    return tilted, a, gx, gy
+
+
+@numba.njit(cache=True, nogil=False)
+def _linear(level, gamma):
+    """Linear light (float32, 255 for white) of an encoded grey level."""
+    return _F32(255.0 * (max(np.float64(level), 0.0) / 255.0) ** gamma)
+
+
+@numba.njit(cache=True, nogil=False)
+def _plane(n, sx, sy, sxx, sxy, syy, sv, sxv, syv):
+    """Least-squares plane a + gx dx + gy dy from its sums: ``(ok, a, gx, gy)``."""
+    # Centred sums: the plane's slopes, then its value at the origin.
+    mx, my, mv = sx / n, sy / n, sv / n
+    cxx, cxy, cyy = sxx - n * mx * mx, sxy - n * mx * my, syy - n * my * my
+    cxv, cyv = sxv - n * mx * mv, syv - n * my * mv
+    det = cxx * cyy - cxy * cxy
+    if not det > 1e-9 * (cxx * cyy + 1e-12):
+        return False, 0.0, 0.0, 0.0
+    gx = (cyy * cxv - cxy * cyv) / det
+    gy = (cxx * cyv - cxy * cxv) / det
+    return True, mv - gx * mx - gy * my, gx, gy
 
 
 @numba.njit(cache=True, nogil=False)
@@ -662,8 +815,8 @@ def _group_indices(minor, big_from, big):
 
 @numba.njit(cache=True, nogil=False)
 def _first_group(source, scale, index, pred, U, semi, Linv, spots, plane_xy, owner, half,
-                 resolution, major, minor, white_level, paper_sigma, paper_quiet, core_margin,
-                 min_darkness, points, valid, peak, area, inside):
+                 resolution, major, minor, white_level, paper_sigma, paper_quiet, gamma,
+                 core_margin, min_darkness, points, valid, peak, area, inside):
     """Lay out one group's windows and take their first pass (:func:`first_pass`)."""
     base, size, axes, wpred, wsemi, to_plane = windows(index, scale, pred, U, semi, Linv)
     # Noise of the source image: decimation averages scale * scale pixels.
@@ -674,8 +827,8 @@ def _first_group(source, scale, index, pred, U, semi, Linv, spots, plane_xy, own
     (pixels, in_image, raw, weight, cell, window, on_card, centres, top,
      spread) = first_pass(source, scale, base, size, index, axes, wpred, wsemi, to_plane,
                           spots, plane_xy, owner, half, resolution, major, minor, Linv,
-                          white_level, quiet, core_margin, min_darkness, points, valid, peak,
-                          area, inside)
+                          white_level, quiet, gamma, core_margin, min_darkness, points, valid,
+                          peak, area, inside)
     return (base, size, axes, wpred, to_plane, pixels, in_image, raw, weight, cell, window,
             on_card, centres, top, spread, sigma)
 
@@ -701,7 +854,7 @@ def _uncover(index, minor, valid, readable, partial, inside):
 @numba.njit(cache=True, nogil=False)
 def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from, spots,
             plane_xy, owner, half, resolution, white_grid, grid_step, paper_sigma, paper_quiet,
-            min_darkness, core_margin, refine, min_valid, colour, table, max_shift):
+            gamma, min_darkness, core_margin, refine, min_valid, colour, table, max_shift):
     """
     Measure spots where their predicted centres ``pred`` are: every pass, in one call.
 
@@ -713,7 +866,8 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     (the image decimated by ``small_scale``), the others on ``image``
     (both (H, W, C) uint8); the first pass (:func:`first_pass`, against
     the local white ``white_grid`` (float32, ``grid_step`` pixels a cell)
-    and the paper's noise ``paper_sigma`` and ``paper_quiet`` (NaN: none));
+    and the paper's noise ``paper_sigma`` and ``paper_quiet`` (NaN: none),
+    ``gamma`` the camera's encoding);
     then, when ``refine`` and (``min_valid`` > 0) the first spot and at
     least ``min_valid`` are valid, the blur (:func:`blur`) and the last
     pass (:func:`last_pass`); when ``colour``, the colours
@@ -758,11 +912,11 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     # run two copies of each pass (compile time, and code to load per frame).
     full = np.int64(1)
     g1 = _first_group(image, full, index1, pred, U, semi, Linv, spots, plane_xy, owner, half,
-                      resolution, major, minor, white_level, paper_sigma, paper_quiet,
+                      resolution, major, minor, white_level, paper_sigma, paper_quiet, gamma,
                       core_margin, min_darkness, points, valid, peak, area, inside)
     g2 = _first_group(small, small_scale, index2, pred, U, semi, Linv, spots, plane_xy, owner,
                       half, resolution, major, minor, white_level, paper_sigma, paper_quiet,
-                      core_margin, min_darkness, points, valid, peak, area, inside)
+                      gamma, core_margin, min_darkness, points, valid, peak, area, inside)
     # The tolerance of the last pass's test of a dot's centre (last_pass).
     for i in range(n if fit else 0):
         reach = 0.3 * major[i] + 1.0
@@ -801,7 +955,8 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
                             colour_out, channel_at, strength)
             # The shift moves centres only; the uncovered parts (after this
             # call) read and write colours only.
-            undo_channel_shift(channel_at, strength, max_shift, valid, points)
+            undo_channel_shift(channel_at, strength, max_shift, valid, points, minor,
+                               colour_out, gamma)
             uncover1 = _uncover(index1, minor, valid, readable, partial, inside)
             uncover2 = _uncover(index2, minor, valid, readable, partial, inside)
     return ((fit, points, valid, readable, peak, colour_out, area, inside, partial, centred,
@@ -1021,7 +1176,7 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
 
 
 @numba.njit(cache=True, nogil=False)
-def undo_channel_shift(channel_at, strength, limit, valid, points):
+def undo_channel_shift(channel_at, strength, limit, valid, points, minor, peak, gamma):
     """
     Move each point by its ink's channel shift (see :func:`~.centres._undo_channel_shift`).
 
@@ -1029,7 +1184,15 @@ def undo_channel_shift(channel_at, strength, limit, valid, points):
     its darkness. A channel is dark in a dot at 0.6 of its darkest
     channel's strength. The card's shifts of red and blue against green
     are the medians (clipped to ``limit``) over the ``valid`` dots dark in
-    both; each point moves by the mean shift of its dark channels.
+    both. Shifted by more than ``_OWN_CHANNELS_FROM``, a dot whose
+    semi-minor axis ``minor`` (image pixels) is ``_OWN_CHANNELS_SIZE``
+    times the shift or more is where its dark channels' own images put
+    it, each less its shift (weighted by their darkness); a smaller dot
+    moves by the mean shift of its dark channels, each weighted by its
+    ``peak`` darkness (linear, per channel) in the camera's encoding
+    (``gamma``): the image's darkest channel is darker where the darker
+    channel's image is. Shifted less: the plain mean of the dark channels'
+    shifts.
     """
     n = strength.shape[0]
     dark = np.empty((n, 3), dtype=np.bool_)
@@ -1053,13 +1216,32 @@ def undo_channel_shift(channel_at, strength, limit, valid, points):
             moved = moved or shift[ch, axis] != 0.0
     if not moved:
         return
+    largest = max(np.hypot(shift[0, 0], shift[0, 1]), np.hypot(shift[2, 0], shift[2, 1]))
+    own = largest > _OWN_CHANNELS_FROM
     for i in range(n):
-        count = max(int(dark[i, 0]) + int(dark[i, 1]) + int(dark[i, 2]), 1)
-        for axis in range(2):
-            bias = 0.0
+        if own and minor[i] >= _OWN_CHANNELS_SIZE * largest:
+            weight, at_x, at_y = 0.0, 0.0, 0.0
             for ch in range(3):
-                bias += shift[ch, axis] if dark[i, ch] else 0.0
-            points[i, axis] = points[i, axis] - bias / count
+                if dark[i, ch]:
+                    weight += strength[i, ch]
+                    at_x += strength[i, ch] * (channel_at[i, ch, 0] - shift[ch, 0])
+                    at_y += strength[i, ch] * (channel_at[i, ch, 1] - shift[ch, 1])
+            if weight > 0.0 and np.isfinite(at_x) and np.isfinite(at_y):
+                points[i, 0], points[i, 1] = at_x / weight, at_y / weight
+                continue
+        weight = 0.0
+        bias_x, bias_y = 0.0, 0.0
+        for ch in range(3):
+            if dark[i, ch]:
+                encoded = 1.0
+                if own and np.isfinite(peak[i, ch]):
+                    encoded = 1.0 - (1.0 - min(max(peak[i, ch], 0.0), 1.0)) ** (1.0 / gamma)
+                weight += encoded
+                bias_x += encoded * shift[ch, 0]
+                bias_y += encoded * shift[ch, 1]
+        if weight > 0.0:
+            points[i, 0] -= bias_x / weight
+            points[i, 1] -= bias_y / weight
 
 
 @numba.njit(cache=True, nogil=False)

@@ -116,7 +116,7 @@ def test_windows_round_halves_to_even_as_numpy():
         assert np.allclose(to_plane, 0.001 * scale * axes)
 
 
-def first_pass(image, base, size, pred, semi=(3.0, 2.0)):
+def first_pass(image, base, size, pred, semi=(3.0, 2.0), axes=(2.0, 1.5)):
     """Run the first pass on windows at ``base`` (one spot per window, plane all its own)."""
     dot_image = segment(image, DetectorParams(field='frame'))
     k = len(base)
@@ -127,10 +127,57 @@ def first_pass(image, base, size, pred, semi=(3.0, 2.0)):
         dot_image.image, 1, np.asarray(base, np.int64), size, np.arange(k),
         eye.astype(np.float32), np.asarray(pred, float), np.tile(semi, (k, 1)),
         0.001 * eye.astype(np.float32), np.zeros(k, np.int64), np.zeros((k, 2)),
-        np.zeros((1, 1), np.int16), 10.0, 100.0, np.full(k, 2.0), np.full(k, 1.5), 0.001 * eye,
+        np.zeros((1, 1), np.int16), 10.0, 100.0, np.full(k, float(axes[0])),
+        np.full(k, float(axes[1])), 0.001 * eye,
         dot_image.white_at(*(np.asarray(pred, float) + base).T).astype(np.float32),
-        np.float32(1.0), 1.0, 0.12, *out)
+        np.float32(1.0), 2.2, 1.0, 0.12, *out)
     return dot_image, result, out
+
+
+def glossy_dot(added_per_px, centre=(40.3, 39.6), radius=5.0, size=81):
+    """Draw a dot on paper under light added along x (linear light), encoded with gamma 2.2."""
+    fine = 4
+    ys, xs = np.mgrid[0:size * fine, 0:size * fine]
+    x, y = (xs + 0.5) / fine - 0.5, (ys + 0.5) / fine - 0.5
+    ink = np.hypot(x - centre[0], y - centre[1]) <= radius
+    linear = np.where(ink, 0.05, 0.6) + added_per_px * (x - centre[0]) + 0.1
+    linear = linear.reshape(size, fine, size, fine).mean(axis=(1, 3))
+    grey = np.rint(255.0 * np.clip(linear, 0.0, 1.0) ** (1 / 2.2)).astype(np.uint8)
+    return np.ascontiguousarray(np.dstack([grey] * 3))
+
+
+@pytest.mark.parametrize('added', [0.004, 0.008, -0.006])
+def test_a_dot_on_tilted_paper_is_centred_where_it_is(added):
+    # Light added unevenly (a highlight's flank) is added to ink and paper
+    # alike: the dot's darkness is taken below a plane fitted to its paper
+    # ring, in linear light (_paper_tilt), so its centroid stays put.
+    # Below a level white in the encoding its first centroid moved 0.8-1.3 px.
+    image = glossy_dot(added)
+    pred = np.array([[12.3, 11.6]])
+    _, _, (points, valid, _, _, _) = first_pass(image, [[28, 28]], 25, pred,
+                                                semi=(11.0, 11.0), axes=(5.0, 5.0))
+    assert valid[0] and np.hypot(*(points[0] - (40.3, 39.6))) < 0.06
+
+
+def test_flat_paper_and_an_object_beside_a_dot_tilt_nothing():
+    # The same dot, in flat light, and with a dark object over a third of
+    # the paper round it: no tilt (the object is no highlight), so the
+    # first pass is what it was (its centroid pulled by the object, which
+    # the last pass's tests then catch).
+    flat = glossy_dot(0.0)
+    touched = flat.copy()
+    touched[:, 50:] = 40
+    pred = np.array([[12.3, 11.6]])
+    for image in (flat, touched):
+        level = spot_kernels._paper_level(
+            image, 28, 28, 25, np.eye(2, dtype=np.float32)[None], 0, 12.3, 11.6, 5.0, 5.0,
+            np.float32(image[:, :49].max()), np.float32(1.0), np.empty(625, np.uint8),
+            0.001 * np.eye(2, dtype=np.float32)[None], np.float32(0.0), np.float32(0.0),
+            np.zeros((1, 1), np.int16), 0, np.float32(10.0), np.float32(100.0))
+        assert level[1] == 0.0 and level[2] == 0.0
+    _, _, (points, _, _, _, _) = first_pass(flat, [[28, 28]], 25, pred, semi=(11.0, 11.0),
+                                            axes=(5.0, 5.0))
+    assert np.hypot(*(points[0] - (40.3, 39.6))) < 0.03
 
 
 def test_windows_inside_and_across_the_border_hold_the_image_pixels():

@@ -349,6 +349,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
     plane_x = np.empty((size, size), dtype=np.float32)
     plane_y = np.empty((size, size), dtype=np.float32)
     paper = np.empty(size * size, dtype=np.uint8)
+    ring = np.empty((size * size, 3))
     for k in range(k_count):
         i = index[k]
         bx, by = base[k, 0], base[k, 1]
@@ -359,7 +360,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         level, tilt_x, tilt_y = _paper_level(
             source, bx, by, size, axes, k, pred[k, 0], pred[k, 1], major[i] / scale,
             minor[i] / scale, white_level[i], quiet, paper, to_plane, qx0, qy0, owner,
-            spots[i], half32, resolution32)
+            spots[i], half32, resolution32, ring)
         floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
         clear = level - floor
         # A tilted paper (a highlight's flank): its light is added to ink
@@ -474,7 +475,7 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
 
 @numba.njit(cache=True, nogil=False)
 def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, quiet,
-                 buffer, to_plane, qx0, qy0, owner, spot, half, resolution):
+                 buffer, to_plane, qx0, qy0, owner, spot, half, resolution, samples):
     """
     Return a dot's white at its centre and the paper's tilt: ``(level, gx, gy)``.
 
@@ -482,7 +483,8 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
     the dot's semi-axes (``major``, ``minor``, source pixels, along
     ``axes[k]``) round (``c0``, ``c1``) in the window whose origin is
     (``bx``, ``by``), within the image; ``buffer`` holds at least ``size *
-    size`` values; ``quiet`` is the source's noise. Where a plane fits the
+    size`` values, ``samples`` as many rows of three; ``quiet`` is the
+    source's noise. Where a plane fits the
     part of that paper that is the dot's own (``owner``'s cell ``spot``,
     plane positions from ``to_plane``, window point (``c0``, ``c1``) at
     (``qx0``, ``qy0``): not a neighbour's blur) and tilts clearly
@@ -500,6 +502,10 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
     below = (_F32(1.0) - _F32(_FLANK)) * grid_white
     count = 0
     bright = 0
+    # The dot's own part of the ring, for its tilt (big enough dots only).
+    tilts = minor >= _TILT_MIN_SEMI_AXIS
+    own = 0
+    ax0, ay0 = _F32(c0), _F32(c1)
     for y in range(y0, y1):
         v = by + y
         if v < 0 or v >= h:
@@ -515,12 +521,17 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
             buffer[count] = darkest
             count += 1
             bright += _F32(darkest) >= below
+            if tilts:
+                qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
+                if _owned(owner, spot, qx, qy, half, resolution):
+                    samples[own, 0] = x - c0
+                    samples[own, 1] = y - c1
+                    samples[own, 2] = np.float64(darkest)
+                    own += 1
     if count < _MIN_PAPER_PIXELS:
         return grid_white, 0.0, 0.0
-    if minor >= _TILT_MIN_SEMI_AXIS:
-        tilted, a, gx, gy = _paper_tilt(source, bx, by, axes, k, c0, c1, major, quiet,
-                                        ca, cb, ia, ib, oa, ob, x0, x1, y0, y1, to_plane,
-                                        qx0, qy0, owner, spot, half, resolution)
+    if tilts:
+        tilted, a, gx, gy = _paper_tilt(samples, own, major, quiet)
         if tilted:
             return _F32(a), gx, gy
     # The upper quartile (numpy's, interpolated between the sorted values
@@ -534,58 +545,47 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
 
 
 @numba.njit(cache=True, nogil=False)
-def _paper_tilt(source, bx, by, axes, k, c0, c1, major, quiet, ca, cb, ia, ib, oa, ob,
-                x0, x1, y0, y1, to_plane, qx0, qy0, owner, spot, half, resolution):
+def _paper_tilt(samples, count, major, quiet):
     """
-    Fit a plane to the paper ring of :func:`_paper_level`: ``(tilted, a, gx, gy)``.
+    Fit a plane to a dot's paper: ``(tilted, a, gx, gy)``.
 
-    Fitted twice, the second time without the samples more than
-    ``_TILT_OUTLIER`` of the level below the first plane (an object, a
-    neighbour's blur). Tilted when the plane changes by more than
-    ``_TILT`` of its level across the dot (and by ``_TILT_NOISE`` times the
-    noise), and the paper kept lies on it (residuals' RMS at most
-    ``_TILT_FIT`` of the level, or twice the noise): a highlight's smooth
-    flank, not an object's edge.
+    ``samples``' first ``count`` rows are (dx, dy, grey level) round the
+    dot's centre (source pixels; :func:`_paper_level`'s ring, the dot's
+    own part). Fitted twice, the second time without the samples more
+    than ``_TILT_OUTLIER`` of the level below the first plane (an object,
+    a neighbour's blur); the second fit only where the first tilts by
+    half the bar. Tilted when the plane changes by more than ``_TILT`` of
+    its level across the dot (``major``: its semi-major axis; and by
+    ``_TILT_NOISE`` times the noise ``quiet``), and the paper kept lies on
+    it (residuals' RMS at most ``_TILT_FIT`` of the level, or twice the
+    noise): a highlight's smooth flank, not an object's edge.
     """
-    h, w, channels = source.shape
     a, gx, gy = 0.0, 0.0, 0.0
     for rounds in range(2):
         floor = _TILT_OUTLIER * a
         n = 0
         sxx = sxy = syy = sx = sy = 0.0
         sv = sxv = syv = svv = 0.0
-        for y in range(y0, y1):
-            v = by + y
-            if v < 0 or v >= h:
+        for j in range(count):
+            dx, dy, value = samples[j, 0], samples[j, 1], samples[j, 2]
+            if rounds == 1 and value < a + gx * dx + gy * dy - floor:
                 continue
-            for x in range(x0, x1):
-                u = bx + x
-                if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
-                        or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
-                    continue
-                qx, qy = _plane_at(to_plane, k, x, y, _F32(c0), _F32(c1), qx0, qy0)
-                if not _owned(owner, spot, qx, qy, half, resolution):
-                    continue
-                darkest = np.uint8(255)
-                for ch in range(channels):
-                    darkest = min(darkest, source[v, u, ch])
-                dx, dy, value = x - c0, y - c1, np.float64(darkest)
-                if rounds == 1 and value < a + gx * dx + gy * dy - floor:
-                    continue
-                n += 1
-                sx += dx
-                sy += dy
-                sxx += dx * dx
-                sxy += dx * dy
-                syy += dy * dy
-                sv += value
-                sxv += dx * value
-                syv += dy * value
-                svv += value * value
+            n += 1
+            sx += dx
+            sy += dy
+            sxx += dx * dx
+            sxy += dx * dy
+            syy += dy * dy
+            sv += value
+            sxv += dx * value
+            syv += dy * value
+            svv += value * value
         if n < _MIN_PAPER_PIXELS:
             return False, 0.0, 0.0, 0.0
         ok, a, gx, gy = _plane(n, sx, sy, sxx, sxy, syy, sv, sxv, syv)
         if not (ok and a > 0.0):
+            return False, 0.0, 0.0, 0.0
+        if rounds == 0 and not np.hypot(gx, gy) * 2.0 * major > 0.5 * _TILT * a:
             return False, 0.0, 0.0, 0.0
     # The residuals' sum of squares from the sums: sum (v - a - gx dx - gy dy)^2.
     rss = (svv - 2.0 * (a * sv + gx * sxv + gy * syv) + a * a * n + gx * gx * sxx

@@ -173,7 +173,8 @@ def test_flat_paper_and_an_object_beside_a_dot_tilt_nothing():
             image, 28, 28, 25, np.eye(2, dtype=np.float32)[None], 0, 12.3, 11.6, 5.0, 5.0,
             np.float32(image[:, :49].max()), np.float32(1.0), np.empty(625, np.uint8),
             0.001 * np.eye(2, dtype=np.float32)[None], np.float32(0.0), np.float32(0.0),
-            np.zeros((1, 1), np.int16), 0, np.float32(10.0), np.float32(100.0))
+            np.zeros((1, 1), np.int16), 0, np.float32(10.0), np.float32(100.0),
+            np.empty((625, 3)))
         assert level[1] == 0.0 and level[2] == 0.0
     _, _, (points, _, _, _, _) = first_pass(flat, [[28, 28]], 25, pred, semi=(11.0, 11.0),
                                             axes=(5.0, 5.0))

@@ -507,8 +507,11 @@ def score_located(located: Sequence[LocatedCard], frame: Frame,
             if truth is not None and not out.found and card.covariance is not None:
                 error = np.asarray(card.camera_in_pattern) - truth
                 out.error_cm = 100.0 * float(np.linalg.norm(error))
-                out.sigmas = float(np.sqrt(max(0.0, error @ np.linalg.solve(
-                    card.covariance[:3, :3], error))))
+                try:
+                    out.sigmas = float(np.sqrt(max(0.0, error @ np.linalg.solve(
+                        card.covariance[:3, :3], error))))
+                except np.linalg.LinAlgError:    # a covariance that claims too much
+                    out.sigmas = math.inf
                 out.side_sure = not flip_unsure(card.other_probability, card.flip_barrier)
             out.found = True
     return out

@@ -43,18 +43,20 @@ _FLANK = 0.08
 _MIN_PAPER_PIXELS = 12
 # A highlight's flank also tilts the paper across a dot, and a dot's
 # darkness below a level white is then heavier on its darker side: its
-# centroid moves towards it (a tenth of a pixel where the paper changes by
-# a per cent across the dot, half a pixel at ten: on a glossy card, poses
-# whose covariance did not cover their error). Where a plane fitted to the
-# paper ring changes by more than _TILT of its level across the dot (and
-# by more than _TILT_NOISE times the noise) and the paper lies on it, the
-# dot's darkness is taken below the plane (:func:`_paper_tilt`). Samples
-# more than _TILT_OUTLIER of the level below a first fit (an object, a
-# neighbour's blur) are left out of the second. Dots under
-# _TILT_MIN_SEMI_AXIS source pixels keep a level white: their rings hold
-# their neighbours' blur.
+# centroid moves towards it (a tenth of a pixel where the light added
+# changes by 2-6 % of the paper's across the dot, half a pixel at 20-60 %:
+# on a glossy card, poses whose covariance did not cover their error).
+# Where a plane fitted to the dot's own paper changes by more than _TILT
+# of its level across the dot, by more than _TILT_NOISE times the noise,
+# with a slope _TILT_SURE (a chi-square) clear of its own uncertainty,
+# and the paper lies on it (_TILT_FIT), the dot's darkness is taken below
+# the plane (:func:`_paper_tilt`). Samples more than _TILT_OUTLIER of the
+# level below a first fit (an object) are left out of the second. Dots
+# under _TILT_MIN_SEMI_AXIS source pixels keep a level white: their rings
+# hold their neighbours' blur.
 _TILT = 0.02
 _TILT_NOISE = 2.0
+_TILT_SURE = 25.0
 _TILT_FIT = 0.015
 _TILT_OUTLIER = 0.06
 _TILT_MIN_SEMI_AXIS = 2.5
@@ -70,7 +72,6 @@ _TILT_MIN_SEMI_AXIS = 2.5
 # shifts (smaller dots, cut, came out up to 0.6 px off).
 _OWN_CHANNELS_FROM = 0.25
 _OWN_CHANNELS_SIZE = 2.5
-_TILT_SURE = 25.0
 
 
 @numba.njit(cache=True, nogil=False)
@@ -484,14 +485,13 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
     ``axes[k]``) round (``c0``, ``c1``) in the window whose origin is
     (``bx``, ``by``), within the image; ``buffer`` holds at least ``size *
     size`` values, ``samples`` as many rows of three; ``quiet`` is the
-    source's noise. Where a plane fits the
-    part of that paper that is the dot's own (``owner``'s cell ``spot``,
-    plane positions from ``to_plane``, window point (``c0``, ``c1``) at
-    (``qx0``, ``qy0``): not a neighbour's blur) and tilts clearly
-    (:func:`_paper_tilt`), the plane: its value at the centre and its
-    slopes (grey levels per source pixel, x and y). Otherwise no tilt, and
-    the grid's white, or the paper's upper quartile where that lies more
-    than ``_FLANK`` below it.
+    source's noise. Where a plane fits the part of that paper that is the
+    dot's own (``owner``'s cell ``spot``, plane positions from
+    ``to_plane``, window point (``c0``, ``c1``) at (``qx0``, ``qy0``): not
+    a neighbour's blur) and tilts clearly (:func:`_paper_tilt`), the
+    plane: its value at the centre and its slopes (grey levels per source
+    pixel, x and y). Otherwise no tilt, and the grid's white, or the
+    paper's upper quartile where that lies more than ``_FLANK`` below it.
     """
     h, w, channels = source.shape
     ca, cb = _ellipse_origin(axes, k, c0, c1)

@@ -50,12 +50,11 @@ def test_poses_are_scored_against_the_truth():
     camera = bench_cameras()[frame.camera_name]
     locator = stress.CardLocator(CONFIG)
     truth = stress.camera_position(frame, camera)
-    result = stress.score_located(locator.locate(stress.render_frame(
-        frame, camera, CONFIG, 'dots'), camera), frame, truth)
+    located = locator.locate(stress.render_frame(frame, camera, CONFIG, 'dots'), camera)
+    result = stress.score_located(located, frame, truth)
     assert result.found and result.error_cm < 2.0 and result.sigmas < 4.0
     # A truth 10 cm off is many sigmas off.
-    far_off = stress.score_located(locator.locate(stress.render_frame(
-        frame, camera, CONFIG, 'dots'), camera), frame, truth + [0.1, 0.0, 0.0])
+    far_off = stress.score_located(located, frame, truth + [0.1, 0.0, 0.0])
     assert far_off.error_cm > 8.0 and far_off.sigmas > 10.0
     table = stress.pose_table({'plain': stress.Row('plain', [frame], [result])})
     assert re.search(r'plain\s+1\s+\d', table) and 'all conditions' in table

@@ -66,6 +66,11 @@ class SpotMeasures:
     # spot (as a dot's last centroid must be): a spot printed there, not
     # the edge of an object beside the place, whose darkness pulls it off.
     centred: Optional[np.ndarray] = None
+    # (P, 3) a far card's colours, from each dot's darkness summed round it
+    # (its colour spread by JPEG or video; spot_kernels.small_card_colours):
+    # read when the peaks in ``colour`` give no whole code. None for a card
+    # whose dots are bigger.
+    far_colour: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.partial is None:
@@ -257,9 +262,9 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
         _colour_table(paper.colour, params.gamma) if colour else _NO_TABLE,
         float(params.max_channel_shift_px))
     (_, points, valid, readable, peak, colours, area, inside, partial, centred, major,
-     minor) = rows
+     minor, far, far_colour) = rows
     out = SpotMeasures(points, pred, valid, readable, peak, colours, area, inside, partial,
-                       centred)
+                       centred, far_colour if far else None)
     for scale, (index, size, axes, window_pred, to_plane, cell, on_card, in_image, dark,
                 uncover) in ((1, windows_1), (dot_image.scale, windows_s)):
         if uncover:

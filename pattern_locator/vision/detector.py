@@ -25,6 +25,7 @@ bounded time and memory on any image.
 
 import dataclasses
 from dataclasses import dataclass, field
+import functools
 from typing import Dict, Iterable, Iterator, List, Optional, Tuple
 
 import numpy as np
@@ -34,7 +35,7 @@ from .camera import CameraModel
 from .cards import (apply_h, CardGuess, far_candidates, fit_homography, group,
                     rank_candidates, rotation_about_z)
 from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
-from .code_reading import (code_table, handedness, partial_hypotheses, read_code,
+from .code_reading import (code_table, handedness, partial_hypotheses, read_code, Reading,
                            sole_hypothesis)
 from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
@@ -318,9 +319,13 @@ class Detector:
         # Colours of the dots kept by the refit, and of those whose inner part
         # is clean though their rim is not (an object beside them).
         readable = valid | (spots.readable & ~spots.valid)
-        reading = read_code(spots.colour, readable, n_rings, cfg, params, paper.colour,
-                            max_hidden=params.max_hidden_slots if self._codes else 1,
-                            partial=spots.partial, known_codes=bool(self._codes))
+        read = functools.partial(read_code, valid=readable, n_rings=n_rings, config=cfg,
+                                 params=params, white=paper.colour,
+                                 max_hidden=params.max_hidden_slots if self._codes else 1,
+                                 partial=spots.partial, known_codes=bool(self._codes))
+        reading = read(spots.colour)
+        if spots.far_colour is not None and (reading is None or reading.code is None):
+            reading = _far_reading(reading, read(spots.far_colour))
         if reading is None:
             return None
         valid[list(reading.not_dots)] = False
@@ -457,6 +462,26 @@ class Detector:
                               min_darkness=min(self.params.min_window_darkness,
                                                0.5 * black_peak))
         return handedness(marks, black_peak) == 'ok'
+
+
+def _far_reading(peaks: Optional[Reading], sums: Optional[Reading]) -> Optional[Reading]:
+    """
+    Read a far card by its dots' peaks, else by their darkness summed round them.
+
+    JPEG and video spread a dot of a pixel or two's colour round it, which
+    greys its peak (``SpotMeasures.far_colour``); the sums are read when
+    the peaks give no whole code. They in turn take in a neighbour's spread
+    colour and JPEG's ringing, which the peaks do not (a black dot read as
+    green), so they never overrule a slot the peaks read: they complete a
+    partial reading only where they agree with every slot and the centre it
+    saw.
+    """
+    if sums is None or peaks is None:
+        return peaks or sums
+    if sums.code is None or peaks.centre_letter != sums.centre_letter or any(
+            a not in ('?', b) for a, b in zip(peaks.slot_letters, sums.slot_letters)):
+        return peaks
+    return sums
 
 
 def _centre_blob(fine, u: float, v: float, radius: float) -> Optional[int]:

@@ -72,6 +72,21 @@ _TILT_MIN_SEMI_AXIS = 2.5
 # shifts (smaller dots, cut, came out up to 0.6 px off).
 _OWN_CHANNELS_FROM = 0.25
 _OWN_CHANNELS_SIZE = 2.5
+# A far card's dots are a pixel or two across, and their colour is greyed
+# at its peak: JPEG and 4:2:0 video keep colour at half resolution, and
+# composite video blurs it along the line, so a dot's colour is spread
+# round it (its luminance is not). Summed over the dot grown by
+# _VOLUME_GROW pixels (in its cell, apart from other dark regions), each
+# channel keeps its darkness, and the colour's direction is the ink's
+# again. A card whose dots' median radius (the geometric mean of their
+# semi-axes, image pixels) is below _VOLUME_BELOW takes its colours'
+# direction from these sums, every dot alike (the inks are represented
+# by the ring's own dots, so the centre must be measured as they are),
+# and keeps its peaks' strength. On 400 far frames (5.5-8 m, seeds
+# 20-29), 1, 1.5 and 2 pixels grown found 9, 11 and 8 more cards than the
+# peaks (375), 3 pixels 2 more (more paper noise and neighbours' blur).
+_VOLUME_GROW = 1.5
+_VOLUME_BELOW = 2.5
 
 
 @numba.njit(cache=True, nogil=False)
@@ -871,14 +886,16 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     then, when ``refine`` and (``min_valid`` > 0) the first spot and at
     least ``min_valid`` are valid, the blur (:func:`blur`) and the last
     pass (:func:`last_pass`); when ``colour``, the colours
-    (:func:`colours`, with the darkness ``table``) and the channels'
-    shift (:func:`undo_channel_shift`).
+    (:func:`colours`, with the darkness ``table``), the channels' shift
+    (:func:`undo_channel_shift`) and a far card's colours
+    (:func:`small_card_colours`).
 
     Returns ``(fit, points, valid, readable, peak, colour, area, inside,
-    partial, centred, major, minor)`` (:class:`.centres.SpotMeasures`'
-    rows) and, for the groups on the image and on ``small``, each window's
-    ``(index, size, axes, pred, to_plane, cell, on_card, in_image,
-    darkness, uncover)``: what :func:`.centres._uncovered_part` reads of
+    partial, centred, major, minor, far, far_colour)``
+    (:class:`.centres.SpotMeasures`' rows; ``far``: whether ``far_colour``
+    holds a far card's colours) and, for the groups on the image and on
+    ``small``, each window's ``(index, size, axes, pred, to_plane, cell,
+    on_card, in_image, darkness, uncover)``: what :func:`.centres._uncovered_part` reads of
     a group whose ``uncover`` (:func:`_uncover`) says it has work.
     """
     n = pred.shape[0]
@@ -887,6 +904,8 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     readable = np.zeros(n, dtype=np.bool_)
     peak = np.zeros(n)
     colour_out = np.full((n, 3), np.nan)
+    far_colour = np.full((n, 3), np.nan)
+    far = False
     area = np.zeros(n)
     inside = np.zeros(n, dtype=np.bool_)
     partial = np.zeros(n, dtype=np.bool_)
@@ -947,20 +966,23 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
         if colour:
             channel_at = np.full((n, 3, 2), np.nan)
             strength = np.zeros((n, 3))
+            volume = np.full((n, 3), np.nan)
             dark1 = colours(g1[5], table, g1[9], g1[10], connected1, g1[2], c1, g1[3], g1[0],
                             full, index1, major, minor, max_shift, valid, readable, colour_out,
-                            channel_at, strength)
+                            channel_at, strength, volume)
             dark2 = colours(g2[5], table, g2[9], g2[10], connected2, g2[2], c2, g2[3], g2[0],
                             small_scale, index2, major, minor, max_shift, valid, readable,
-                            colour_out, channel_at, strength)
+                            colour_out, channel_at, strength, volume)
             # The shift moves centres only; the uncovered parts (after this
             # call) read and write colours only.
             undo_channel_shift(channel_at, strength, max_shift, valid, points, minor,
                                colour_out, gamma)
+            far = small_card_colours(colour_out, volume, major, minor, valid, readable,
+                                     far_colour)
             uncover1 = _uncover(index1, minor, valid, readable, partial, inside)
             uncover2 = _uncover(index2, minor, valid, readable, partial, inside)
     return ((fit, points, valid, readable, peak, colour_out, area, inside, partial, centred,
-             major, minor),
+             major, minor, far, far_colour),
             (index1, g1[1], g1[2], g1[3], g1[4], g1[9], g1[11], g1[6], dark1, uncover1),
             (index2, g2[1], g2[2], g2[3], g2[4], g2[9], g2[11], g2[6], dark2, uncover2))
 
@@ -1086,7 +1108,7 @@ def _floor_index(v, size):
 
 @numba.njit(cache=True, nogil=False)
 def colours(pixels, table, cell, window, connected, axes, centres, pred, base, scale, index,
-            major, minor, max_shift, valid, readable, colour, channel_at, strength):
+            major, minor, max_shift, valid, readable, colour, channel_at, strength, volume):
     """
     Per-channel darkness of each window's dot: where each channel's image is, and its peak.
 
@@ -1101,8 +1123,10 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
     its darkness there is as even as the valid dots'.
 
     Writes ``colour`` (the peaks), ``channel_at`` (each channel's centroid,
-    image pixels) and ``strength`` (its darkness's sum) at ``index``, and
-    updates ``readable``; returns the darkness (K, S, S, 3).
+    image pixels), ``strength`` (its darkness's sum) and ``volume`` (each
+    channel's darkness summed over the dot's ellipse grown by
+    ``_VOLUME_GROW`` pixels, in its cell and not apart from it) at
+    ``index``, and updates ``readable``; returns the darkness (K, S, S, 3).
     """
     k_count, size = pixels.shape[0], pixels.shape[1]
     dark = np.empty((k_count, size, size, 3), dtype=np.float32)
@@ -1165,6 +1189,18 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
             m = mean[ch] / count
             widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
         spread[k] = widest
+        g0 = (major[i] + _VOLUME_GROW) / scale
+        g1 = (minor[i] + _VOLUME_GROW) / scale
+        sa, sb = _inverse_squares(g0, g1)
+        x0, x1, y0, y1 = _span(axes, k, a0, a1, g0, g1, size)
+        for ch in range(3):
+            volume[i, ch] = 0.0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if cell[k, y, x] and connected[k, y, x] \
+                        and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0:
+                    for ch in range(3):
+                        volume[i, ch] += dark[k, y, x, ch]
     # A dot read for its colour alone must be even in every channel there,
     # as the sure dots are: not half ink, half something else.
     typical = _median_where(spread, valid, index, 3)
@@ -1173,6 +1209,38 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
         if readable[i] and not valid[i]:
             readable[i] = spread[k] <= 1.3 * typical + 0.02
     return dark
+
+
+@numba.njit(cache=True, nogil=False)
+def small_card_colours(colour, volume, major, minor, valid, readable, out):
+    """
+    Give a far card's colours: each dot's direction from its ``volume``, strength from its peak.
+
+    When the median over the ``valid`` dots of ``sqrt(major * minor)``
+    (image pixels) is below ``_VOLUME_BELOW``, writes into ``out`` every
+    ``readable`` dot's ``volume`` scaled so that its darkest channel keeps
+    its peak's darkness (``colour``; see ``_VOLUME_GROW``), and returns
+    True; else leaves ``out`` (NaN) and returns False.
+    """
+    n = colour.shape[0]
+    radius = np.empty(n)
+    count = 0
+    for i in range(n):
+        if valid[i]:
+            radius[count] = np.sqrt(major[i] * minor[i])
+            count += 1
+    if count == 0 or not _median(radius[:count]) < _VOLUME_BELOW:
+        return False
+    for i in range(n):
+        if not readable[i]:
+            continue
+        top = max(colour[i, 0], colour[i, 1], colour[i, 2])
+        most = max(volume[i, 0], volume[i, 1], volume[i, 2])
+        if not (top == top and most > 0.0):
+            continue
+        for ch in range(3):
+            out[i, ch] = volume[i, ch] / most * top
+    return True
 
 
 @numba.njit(cache=True, nogil=False)

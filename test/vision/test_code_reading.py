@@ -242,3 +242,18 @@ def test_handedness():
     # Too faint to tell, or marks both ways: unsure.
     assert handedness(marks([1, 1, 0, 0], [0.2, 0.2, 0.0, 0.0]), 0.7) == 'unsure'
     assert handedness(marks([1, 0, 1, 0], [0.7, 0.0, 0.7, 0.0]), 0.7) == 'unsure'
+
+
+def test_a_far_cards_faint_marks_say_it_is_seen_directly_only_against_blank_mirror_places():
+    # Marks a pixel or two across fail the dot tests (not valid), yet are
+    # dark where they belong; the mirror images' places are paper.
+    faint = [0.16, 0.15, 0.0, 0.0]
+    assert handedness(marks([0, 0, 0, 0], faint), 0.26) == 'ok'
+    # Seen in a mirror: the marks at the mirror images' places. No id.
+    assert handedness(marks([0, 0, 0, 0], faint[2:] + faint[:2]), 0.26) == 'unsure'
+    # A mirror image's place not paper, one mark too pale, a place off the
+    # image, or no point 1 to compare with: unsure.
+    assert handedness(marks([0, 0, 0, 0], [0.16, 0.15, 0.05, 0.0]), 0.26) == 'unsure'
+    assert handedness(marks([0, 0, 0, 0], [0.16, 0.06, 0.0, 0.0]), 0.26) == 'unsure'
+    assert handedness(marks([0, 0, 0, 0], faint, (True, True, True, False)), 0.26) == 'unsure'
+    assert handedness(marks([0, 0, 0, 0], [0.0, 0.0, 0.0, 0.0]), 0.0) == 'unsure'

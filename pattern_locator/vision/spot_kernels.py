@@ -79,12 +79,14 @@ _OWN_CHANNELS_SIZE = 2.5
 # _VOLUME_GROW pixels (in its cell, apart from other dark regions), each
 # channel keeps its darkness, and the colour's direction is the ink's
 # again. A card whose dots' median radius (the geometric mean of their
-# semi-axes, image pixels) is below _VOLUME_BELOW takes its colours'
-# direction from these sums, every dot alike (the inks are represented
-# by the ring's own dots, so the centre must be measured as they are),
-# and keeps its peaks' strength. On 400 far frames (5.5-8 m, seeds
-# 20-29), 1, 1.5 and 2 pixels grown found 9, 11 and 8 more cards than the
-# peaks (375), 3 pixels 2 more (more paper noise and neighbours' blur).
+# semi-axes, image pixels) is below _VOLUME_BELOW gets these colours too,
+# every dot's alike (the inks are represented by the ring's own dots, so
+# the centre must be measured as they are), each with its peak's
+# strength; the detector reads them where the peaks give no whole code
+# (they take in a neighbour's spread colour, which the peaks do not). On
+# 400 far frames (5.5-8 m), sums over the dot grown by 1, 1.5 and 2
+# pixels found 9, 11 and 8 more cards than the peaks (375) when read
+# instead of them; by 3 pixels, 2 more.
 _VOLUME_GROW = 1.5
 _VOLUME_BELOW = 2.5
 
@@ -887,8 +889,9 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     least ``min_valid`` are valid, the blur (:func:`blur`) and the last
     pass (:func:`last_pass`); when ``colour``, the colours
     (:func:`colours`, with the darkness ``table``), the channels' shift
-    (:func:`undo_channel_shift`) and a far card's colours
-    (:func:`small_card_colours`).
+    (:func:`undo_channel_shift`) and, for a card of small dots
+    (:func:`small_card`), its colours from each dot's darkness summed round
+    it (:func:`small_card_colours`).
 
     Returns ``(fit, points, valid, readable, peak, colour, area, inside,
     partial, centred, major, minor, far, far_colour)``
@@ -967,18 +970,19 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
             channel_at = np.full((n, 3, 2), np.nan)
             strength = np.zeros((n, 3))
             volume = np.full((n, 3), np.nan)
+            far = small_card(major, minor, valid)
             dark1 = colours(g1[5], table, g1[9], g1[10], connected1, g1[2], c1, g1[3], g1[0],
                             full, index1, major, minor, max_shift, valid, readable, colour_out,
-                            channel_at, strength, volume)
+                            channel_at, strength, far, volume)
             dark2 = colours(g2[5], table, g2[9], g2[10], connected2, g2[2], c2, g2[3], g2[0],
                             small_scale, index2, major, minor, max_shift, valid, readable,
-                            colour_out, channel_at, strength, volume)
+                            colour_out, channel_at, strength, far, volume)
             # The shift moves centres only; the uncovered parts (after this
             # call) read and write colours only.
             undo_channel_shift(channel_at, strength, max_shift, valid, points, minor,
                                colour_out, gamma)
-            far = small_card_colours(colour_out, volume, major, minor, valid, readable,
-                                     far_colour)
+            if far:
+                small_card_colours(colour_out, volume, readable, far_colour)
             uncover1 = _uncover(index1, minor, valid, readable, partial, inside)
             uncover2 = _uncover(index2, minor, valid, readable, partial, inside)
     return ((fit, points, valid, readable, peak, colour_out, area, inside, partial, centred,
@@ -1108,7 +1112,8 @@ def _floor_index(v, size):
 
 @numba.njit(cache=True, nogil=False)
 def colours(pixels, table, cell, window, connected, axes, centres, pred, base, scale, index,
-            major, minor, max_shift, valid, readable, colour, channel_at, strength, volume):
+            major, minor, max_shift, valid, readable, colour, channel_at, strength, sums,
+            volume):
     """
     Per-channel darkness of each window's dot: where each channel's image is, and its peak.
 
@@ -1123,9 +1128,9 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
     its darkness there is as even as the valid dots'.
 
     Writes ``colour`` (the peaks), ``channel_at`` (each channel's centroid,
-    image pixels), ``strength`` (its darkness's sum) and ``volume`` (each
-    channel's darkness summed over the dot's ellipse grown by
-    ``_VOLUME_GROW`` pixels, in its cell and not apart from it) at
+    image pixels), ``strength`` (its darkness's sum) and, when ``sums``,
+    ``volume`` (each channel's darkness summed over the dot's ellipse grown
+    by ``_VOLUME_GROW`` pixels, in its cell and not apart from it) at
     ``index``, and updates ``readable``; returns the darkness (K, S, S, 3).
     """
     k_count, size = pixels.shape[0], pixels.shape[1]
@@ -1189,6 +1194,8 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
             m = mean[ch] / count
             widest = max(widest, np.sqrt(max(squares[ch] / count - m * m, 0.0)))
         spread[k] = widest
+        if not sums:
+            continue
         g0 = (major[i] + _VOLUME_GROW) / scale
         g1 = (minor[i] + _VOLUME_GROW) / scale
         sa, sb = _inverse_squares(g0, g1)
@@ -1212,26 +1219,28 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
 
 
 @numba.njit(cache=True, nogil=False)
-def small_card_colours(colour, volume, major, minor, valid, readable, out):
-    """
-    Give a far card's colours: each dot's direction from its ``volume``, strength from its peak.
-
-    When the median over the ``valid`` dots of ``sqrt(major * minor)``
-    (image pixels) is below ``_VOLUME_BELOW``, writes into ``out`` every
-    ``readable`` dot's ``volume`` scaled so that its darkest channel keeps
-    its peak's darkness (``colour``; see ``_VOLUME_GROW``), and returns
-    True; else leaves ``out`` (NaN) and returns False.
-    """
-    n = colour.shape[0]
+def small_card(major, minor, valid):
+    """Tell whether the median over the ``valid`` dots of ``sqrt(major * minor)`` is small."""
+    n = major.shape[0]
     radius = np.empty(n)
     count = 0
     for i in range(n):
         if valid[i]:
             radius[count] = np.sqrt(major[i] * minor[i])
             count += 1
-    if count == 0 or not _median(radius[:count]) < _VOLUME_BELOW:
-        return False
-    for i in range(n):
+    return count > 0 and _median(radius[:count]) < _VOLUME_BELOW
+
+
+@numba.njit(cache=True, nogil=False)
+def small_card_colours(colour, volume, readable, out):
+    """
+    Give a far card's colours: each dot's direction from its ``volume``, strength from its peak.
+
+    Writes into ``out`` every ``readable`` dot's ``volume`` scaled so that
+    its darkest channel keeps its peak's darkness (``colour``; see
+    ``_VOLUME_GROW``); the others stay as they are (NaN).
+    """
+    for i in range(colour.shape[0]):
         if not readable[i]:
             continue
         top = max(colour[i, 0], colour[i, 1], colour[i, 2])
@@ -1240,7 +1249,6 @@ def small_card_colours(colour, volume, major, minor, valid, readable, out):
             continue
         for ch in range(3):
             out[i, ch] = volume[i, ch] / most * top
-    return True
 
 
 @numba.njit(cache=True, nogil=False)

@@ -225,13 +225,12 @@ def test_a_far_cards_colours_take_their_direction_from_sums_and_strength_from_pe
     sums = np.array([[12.0, 12.0, 3.0], [9.0, 9.0, 9.5], [8.0, 2.0, 8.0]])
     readable = np.array([True, True, False])
     out = np.full((3, 3), np.nan)
-    small = np.array([1.5, 1.5, 1.5])
-    assert spot_kernels.small_card_colours(peaks, sums, small, small, readable, readable, out)
-    assert np.allclose(out[0], [0.6, 0.6, 0.15]) and np.allclose(out[1], [0.5 * 9 / 9.5,
-                                                                          0.5 * 9 / 9.5, 0.5])
+    spot_kernels.small_card_colours(peaks, sums, readable, out)
+    assert np.allclose(out[0], [0.6, 0.6, 0.15])
+    assert np.allclose(out[1], [0.5 * 9 / 9.5, 0.5 * 9 / 9.5, 0.5])
     assert np.all(np.isnan(out[2]))
-    # Dots of 2.5 pixels (the median) and more: their peaks alone.
-    out[:] = np.nan
-    big = np.array([2.5, 2.5, 1.0])
-    assert not spot_kernels.small_card_colours(peaks, sums, big, big, readable, readable, out)
-    assert np.all(np.isnan(out))
+    # Which cards: dots under 2.5 pixels (the median of the valid ones).
+    small, big = np.array([1.5, 1.5, 1.5]), np.array([2.5, 2.5, 1.0])
+    assert spot_kernels.small_card(small, small, readable)
+    assert not spot_kernels.small_card(big, big, readable)
+    assert not spot_kernels.small_card(small, small, np.zeros(3, dtype=bool))

@@ -898,8 +898,9 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     (:class:`.centres.SpotMeasures`' rows; ``far``: whether ``far_colour``
     holds a far card's colours) and, for the groups on the image and on
     ``small``, each window's ``(index, size, axes, pred, to_plane, cell,
-    on_card, in_image, darkness, uncover)``: what :func:`.centres._uncovered_part` reads of
-    a group whose ``uncover`` (:func:`_uncover`) says it has work.
+    on_card, in_image, darkness, uncover)``: what
+    :func:`.centres._uncovered_part` reads of a group whose ``uncover``
+    (:func:`_uncover`) says it has work.
     """
     n = pred.shape[0]
     points = np.full((n, 2), np.nan)

@@ -1239,17 +1239,18 @@ def small_card_colours(colour, volume, readable, out):
 
     Writes into ``out`` every ``readable`` dot's ``volume`` scaled so that
     its darkest channel keeps its peak's darkness (``colour``; see
-    ``_VOLUME_GROW``); the others stay as they are (NaN).
+    ``_VOLUME_GROW``), or its peaks where it has no darkness summed (no
+    pixel of its cell in reach: a readable row is never left NaN); the
+    others stay as they are (NaN).
     """
     for i in range(colour.shape[0]):
         if not readable[i]:
             continue
         top = max(colour[i, 0], colour[i, 1], colour[i, 2])
         most = max(volume[i, 0], volume[i, 1], volume[i, 2])
-        if not (top == top and most > 0.0):
-            continue
         for ch in range(3):
-            out[i, ch] = volume[i, ch] / most * top
+            out[i, ch] = volume[i, ch] / most * top if top == top and most > 0.0 \
+                else colour[i, ch]
 
 
 @numba.njit(cache=True, nogil=False)

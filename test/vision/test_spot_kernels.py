@@ -221,16 +221,19 @@ def test_a_degenerate_homography_measures_nothing():
 
 
 def test_a_far_cards_colours_take_their_direction_from_sums_and_strength_from_peaks():
-    peaks = np.array([[0.6, 0.6, 0.3], [0.5, 0.5, 0.5], [0.4, 0.2, 0.4]])
-    sums = np.array([[12.0, 12.0, 3.0], [9.0, 9.0, 9.5], [8.0, 2.0, 8.0]])
-    readable = np.array([True, True, False])
-    out = np.full((3, 3), np.nan)
+    peaks = np.array([[0.6, 0.6, 0.3], [0.5, 0.5, 0.5], [0.4, 0.2, 0.4], [0.3, 0.2, 0.1]])
+    sums = np.array([[12.0, 12.0, 3.0], [9.0, 9.0, 9.5], [8.0, 2.0, 8.0], [0.0, 0.0, 0.0]])
+    readable = np.array([True, True, False, True])
+    out = np.full((4, 3), np.nan)
     spot_kernels.small_card_colours(peaks, sums, readable, out)
     assert np.allclose(out[0], [0.6, 0.6, 0.15])
     assert np.allclose(out[1], [0.5 * 9 / 9.5, 0.5 * 9 / 9.5, 0.5])
     assert np.all(np.isnan(out[2]))
+    # Nothing summed (no pixel of its cell in reach): its peaks, not NaN.
+    assert np.array_equal(out[3], peaks[3])
     # Which cards: dots under 2.5 pixels (the median of the valid ones).
     small, big = np.array([1.5, 1.5, 1.5]), np.array([2.5, 2.5, 1.0])
-    assert spot_kernels.small_card(small, small, readable)
-    assert not spot_kernels.small_card(big, big, readable)
+    valid = readable[:3]
+    assert spot_kernels.small_card(small, small, valid)
+    assert not spot_kernels.small_card(big, big, valid)
     assert not spot_kernels.small_card(small, small, np.zeros(3, dtype=bool))

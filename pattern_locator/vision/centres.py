@@ -67,9 +67,9 @@ class SpotMeasures:
     # the edge of an object beside the place, whose darkness pulls it off.
     centred: Optional[np.ndarray] = None
     # (P, 3) a far card's colours, from each dot's darkness summed round it
-    # (its colour spread by JPEG or video; spot_kernels.small_card_colours):
-    # read when the peaks in ``colour`` give no whole code. None for a card
-    # whose dots are bigger.
+    # (its colour spread by JPEG or video; spot_kernels.small_card_colours;
+    # a dot that is not valid keeps ``colour``): read when the peaks in
+    # ``colour`` give no whole code. None for a card whose dots are bigger.
     far_colour: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
@@ -271,6 +271,11 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
             g = _Windows(index, scale, size, axes, window_pred, to_plane, cell, on_card,
                          in_image)
             _uncovered_part(g, dark, major, minor, layout, spots, out)
+    if out.far_colour is not None:
+        # A dot that is not valid (an object touches it) keeps its peaks, or
+        # what its uncovered part gave: a sum round it would take in the object.
+        touched = ~out.valid
+        out.far_colour[touched] = out.colour[touched]
     return out
 
 

@@ -17,11 +17,12 @@ import cv2
 import numpy as np
 from pattern_locator.card.pattern import PatternConfig
 from pattern_locator.sim.render import (card_pose_facing, CardPlacement, DotCardTexture,
-                                        MirroredTexture, render_scene, RenderOptions)
+                                        MirroredTexture, Occluder, render_scene,
+                                        RenderOptions)
 from pattern_locator.vision import cards as card_stage
 from pattern_locator.vision import detector as detector_module
 from pattern_locator.vision.camera import CameraModel
-from pattern_locator.vision.centres import card_paper
+from pattern_locator.vision.centres import card_paper, measure_spots
 from pattern_locator.vision.code_reading import read_code, Reading
 from pattern_locator.vision.detector import _far_reading, Detector, DetectorParams
 from pattern_locator.vision.dots import segment
@@ -259,3 +260,22 @@ def test_far_card_whose_dot_one_ring_reads_black_is_read_without_the_map(seed, i
     located = CardLocator(CFG).locate(image, camera)
     assert [(c.detection.ids, c.detection.slots_from_map) for c in located] == [(frame.ids, 0)]
     assert located[0].T_camera_pattern is not None
+
+
+def test_a_far_dot_an_object_touches_keeps_its_peaks_not_its_sum():
+    # A sum round a dot that an object touches would take in the object's
+    # colour; such a dot (not valid) keeps its peaks, or what its uncovered
+    # part gave, among a far card's sums.
+    T = card_pose_facing(6.0, 20.0, 60.0, roll_deg=5.0, offset_px=(0.0, 0.0), camera=VGA)
+    beside = np.array([[0.018, -0.03], [0.06, -0.03], [0.06, 0.03], [0.018, 0.03]])
+    image = render_scene(VGA, [CardPlacement(T, DotCardTexture(CFG, CFG.encode(2, 17, 3)))],
+                         RenderOptions(supersample=2, noise_sigma=1.0, defocus_sigma_px=0.5,
+                                       occluders=(Occluder(0, beside, (0.2, 0.5, 0.2)),))).image
+    H = VGA.K @ np.column_stack([T.R[:, 0], T.R[:, 1], T.t])
+    dot_image = segment(image, DETECTOR.params)
+    paper = card_paper(dot_image, VGA, H, DETECTOR._paper_xy, DETECTOR._paper_room)
+    spots = measure_spots(dot_image, VGA, H, DETECTOR._dot_layout, DETECTOR._dots, paper)
+    assert spots.far_colour is not None and not spots.valid[0]
+    touched = ~spots.valid
+    assert np.array_equal(spots.far_colour[touched], spots.colour[touched], equal_nan=True)
+    assert np.all(np.isfinite(spots.far_colour[spots.valid]))

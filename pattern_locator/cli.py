@@ -523,7 +523,9 @@ def _print_text(name: str, elapsed_ms: float, located: List[LocatedCard]) -> Non
             print(f'    other planar pose {100.0 * card.other_probability:.2g} % likely: camera '
                   f'at x {x:+.3f} y {y:+.3f} z {z:+.3f} m (the image alone does not decide; on '
                   "a robot, up, the camera's height or the last fix may)")
-        if card.alternative is not None and card.flip_barrier < FLIP_VALLEY_BARRIER:
+        # As the localizer's gate: a barrier that is not known to be high enough
+        # (NaN included) is a shallow valley.
+        if card.alternative is not None and not card.flip_barrier >= FLIP_VALLEY_BARRIER:
             print(f'    in one shallow valley of the fit with its other planar pose (barrier '
                   f'{card.flip_barrier:.2g}): the turn is less sure than the sd says')
 

@@ -219,6 +219,22 @@ def test_detect_reports_the_other_planar_pose_when_the_image_cannot_decide(scene
     assert paper_one['other_probability'] == 0.0 and paper_one['flip_barrier'] is None
 
 
+def test_detect_text_says_a_valley_whose_barrier_is_unknown_is_shallow(scene, capsys):
+    # The localizer refuses a pose whose barrier is not at least
+    # FLIP_VALLEY_BARRIER, a NaN one included; the text says the same of it.
+    import dataclasses
+    from pattern_locator.cli import _print_text
+    from pattern_locator.vision.locate import CardLocator
+
+    _, paths, _ = scene
+    (card,) = CardLocator(CFG).locate(cv2.imread(paths['faceon.png']), CAMERA)
+    assert card.alternative is not None
+    for barrier, shallow in ((math.nan, True), (0.5, True), (math.inf, False)):
+        _print_text('faceon', 1.0, [dataclasses.replace(card, flip_barrier=barrier)])
+        out = capsys.readouterr().out
+        assert ('shallow valley' in out) == shallow, out
+
+
 # Errors ----------------------------------------------------------------------------------
 
 def test_bad_images_among_good_ones(scene, capfd):

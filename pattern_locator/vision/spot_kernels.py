@@ -1223,13 +1223,8 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
 def small_card(major, minor, valid):
     """Tell whether the median over the ``valid`` dots of ``sqrt(major * minor)`` is small."""
     n = major.shape[0]
-    radius = np.empty(n)
-    count = 0
-    for i in range(n):
-        if valid[i]:
-            radius[count] = np.sqrt(major[i] * minor[i])
-            count += 1
-    return count > 0 and _median(radius[:count]) < _VOLUME_BELOW
+    return np.any(valid) and _median_where(np.sqrt(major * minor), valid, np.arange(n),
+                                           1) < _VOLUME_BELOW
 
 
 @numba.njit(cache=True, nogil=False)

@@ -281,12 +281,16 @@ def test_two_namespaced_robots_side_by_side_on_one_domain(tmp_path):
             assert max(errors) < 0.5, (ns, errors)
             still = [float(np.linalg.norm(f.located_base.t - f.true_base.t))
                      for f in located(observer, still=True)]
-            # Typically 0.5-3 cm at 4 m. Six nodes share two cores here, and
-            # a single fix was once 6.1 cm off beside two of 1.4 and 1.6 cm
-            # (fresh-clone CI): the median holds the accuracy, the max only
-            # what a loaded machine's timing allows (a joint or namespace
-            # mix-up would be tens of centimetres).
-            assert float(np.median(still)) < 0.03 and max(still) < 0.10, (ns, still)
+            # A still head sees one image over and over, so the still fixes
+            # share one error: that of the view where the head stopped. Over
+            # 160 head angles within 1.5 deg of centring either card (zoom 0)
+            # it was 1.5 cm in the median and at most 3.5 cm, against the
+            # fixes' own 0.7-1.3 cm per axis; CI once saw 3.0 cm. Six nodes
+            # share two cores here, and a single fix was once 6.1 cm off
+            # beside two of 1.4 and 1.6 cm (fresh-clone CI): the median holds
+            # the accuracy, the max only what a loaded machine's timing
+            # allows (a joint or namespace mix-up would be tens of centimetres).
+            assert float(np.median(still)) < 0.05 and max(still) < 0.10, (ns, still)
     finally:
         executor.shutdown()
         for observer in observers.values():

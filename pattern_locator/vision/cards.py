@@ -266,20 +266,21 @@ def _i32(a: np.ndarray) -> np.ndarray:
 # Plane geometry -------------------------------------------------------------------
 
 def fit_homography(obj: np.ndarray, img: np.ndarray, radii: np.ndarray, max_error: float,
-                   min_tolerance: float = 0.75, min_points: int = 6):
+                   min_tolerance: float = 0.75, min_points: int = 6, anchored: bool = True):
     """
     Homography from plane points to pixels with outlier rejection.
 
     A point is an outlier when it is off the fit by more than ``max_error``
     times its dot's image radius (``radii`` in metres), at least
-    ``min_tolerance`` pixels. The last point (the centre) must be an
-    inlier. Returns ``(H, inliers)`` or ``(None, None)``.
+    ``min_tolerance`` pixels. When ``anchored``, the last point (the
+    centre) must be an inlier. Returns ``(H, inliers)`` or ``(None, None)``.
     """
     if len(obj) < min_points:
         return None, None
     # The rounds in one compiled call (fit_kernels.fit_homography_inliers).
     ok, H, inliers = fit_homography_inliers(_f64(obj), _f64(img), _f64(radii), float(max_error),
-                                            float(min_tolerance), int(min_points))
+                                            float(min_tolerance), int(min_points),
+                                            bool(anchored))
     return (H, inliers) if ok else (None, None)
 
 

@@ -55,6 +55,11 @@ _MIN_CENTRE_FILL = 0.8
 _FEW_BLOBS = 150
 # Dots a homography is refitted to, the centre among them.
 _REFIT_MIN = 7
+# Ring dots it is refitted to without the centre. A centre dot that is there
+# (its inner part clean enough to read) but fails the tests of a dot, as
+# under a lamp's highlight across it or with an object at its rim, anchors
+# no fit: three quarters of the ring must.
+_RING_REFIT_MIN = 12
 # 64 points round the unit circle: a found card's outer disc, for the box of
 # the blobs it may cover (Detector._covered).
 _UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2 * np.pi, 64, endpoint=False)),
@@ -90,8 +95,15 @@ class CardDetection:
     # order) that the localizer chooses among by its last fix.
     candidates: Tuple['CardDetection', ...] = ()
 
+    # Where the fit puts the centre (image pixels) when its dot is not among
+    # the points (there, but not measured well enough for the pose).
+    fitted_centre_px: Optional[np.ndarray] = None
+
     @property
     def centre_px(self) -> np.ndarray:
+        """Return the card centre's pixel: its dot's, else where the fit puts it."""
+        if self.fitted_centre_px is not None and np.isnan(self.points_px[0, 0]):
+            return self.fitted_centre_px
         return self.points_px[0]
 
     @property
@@ -408,8 +420,14 @@ class Detector:
         # Half the largest distance between two of the outer ring's points.
         between = ring_px[:, None] - ring_px[None]
         size = 0.5 * float(np.sqrt(np.max(np.sum(between * between, axis=2))))
+        fitted_centre = None
+        if not valid[0]:
+            fitted_centre = H_final[:2, 2] / H_final[2, 2]
+            if camera is not None and camera.has_distortion:
+                fitted_centre = camera.distort_pixels(fitted_centre[None])[0]
         return CardDetection(code, ids, points, areas, tuple(complete), size, H_final,
-                             float(margin), tuple(ring_codes), from_map)
+                             float(margin), tuple(ring_codes), from_map,
+                             fitted_centre_px=fitted_centre)
 
     def _ids_of(self, code: Code) -> Optional[Ids]:
         """Return the ids ``code`` stands for (None if it stands for none), decoded once."""
@@ -423,16 +441,20 @@ class Detector:
     def _refit(self, spots: SpotMeasures, camera: Optional[CameraModel]):
         """Homography refitted to the measured dots; drops those off it. (None, None) if lost."""
         valid = spots.valid.copy()
-        if not _refittable(valid):
+        if not _refittable(valid, bool(spots.readable[0])):
             return None, None
+        anchored = bool(valid[0])
         idx = np.flatnonzero(valid)
-        # The centre last: fit_homography insists on it.
-        idx = np.append(idx[1:], 0)
+        if anchored:
+            # The centre last: fit_homography insists on it.
+            idx = np.append(idx[1:], 0)
         img = spots.points[idx]
         if camera is not None:
             img = camera.undistort_pixels(img)
         H, inliers = fit_homography(self._model[idx], img, self._radii[idx],
-                                    self.params.max_homography_error)
+                                    self.params.max_homography_error,
+                                    min_points=6 if anchored else _RING_REFIT_MIN,
+                                    anchored=anchored)
         if H is None:
             return None, None
         valid[idx[~inliers]] = False
@@ -512,9 +534,16 @@ def _dot_order(config: PatternConfig, point1: int) -> np.ndarray:
     return order
 
 
-def _refittable(valid: np.ndarray) -> bool:
-    """Tell whether measured dots (``valid``, centre first) are enough to refit the homography."""
-    return bool(valid[0]) and np.count_nonzero(valid) >= _REFIT_MIN
+def _refittable(valid: np.ndarray, centre_readable: bool = False) -> bool:
+    """
+    Tell whether measured dots (``valid``, centre first) are enough to refit the homography.
+
+    With the centre, :data:`_REFIT_MIN` dots; without it, a centre dot that
+    is there (``centre_readable``) and :data:`_RING_REFIT_MIN` ring dots.
+    """
+    if valid[0]:
+        return np.count_nonzero(valid) >= _REFIT_MIN
+    return centre_readable and np.count_nonzero(valid[1:]) >= _RING_REFIT_MIN
 
 
 def _paper_points(config: PatternConfig) -> np.ndarray:

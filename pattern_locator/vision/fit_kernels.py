@@ -121,7 +121,7 @@ def fit_homography_points(obj, img):
 
 
 @_kernel
-def fit_homography_inliers(obj, img, radii, max_error, min_tolerance, min_points):
+def fit_homography_inliers(obj, img, radii, max_error, min_tolerance, min_points, anchored):
     """
     Homography from plane points to pixels, refitted without the points off it.
 
@@ -130,7 +130,8 @@ def fit_homography_inliers(obj, img, radii, max_error, min_tolerance, min_points
     (:func:`.card_kernels.homography_inliers`, tolerances set on the first
     fit), up to four fits, until the kept points stay the same. Returns
     ``(ok, H, inliers)``; ``ok`` False when a fit fails, fewer than
-    ``min_points`` points stay on it or the last point (the centre) is off.
+    ``min_points`` points stay on it or, when ``anchored``, the last point
+    (the centre) is off.
     """
     n = obj.shape[0]
     inliers = np.ones(n, dtype=np.bool_)
@@ -155,7 +156,7 @@ def fit_homography_inliers(obj, img, radii, max_error, min_tolerance, min_points
             return False, H, inliers
         ok, now, count, same = homography_inliers(H, obj, img, radii, max_error, min_tolerance,
                                                   tol, inliers, step == 0)
-        if not ok or count < min_points or not now[n - 1]:
+        if not ok or count < min_points or (anchored and not now[n - 1]):
             return False, H, inliers
         if same:
             break
@@ -748,7 +749,8 @@ def warm_up() -> None:
     """Compile (or load from the cache) the kernels with the argument types the detector uses."""
     square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.5, 0.4]])
     fit_homography_points(square, square * 2.0 + 1.0)
-    fit_homography_inliers(square, square * 2.0 + 1.0, np.ones(len(square)), 1.0, 0.75, 4)
+    fit_homography_inliers(square, square * 2.0 + 1.0, np.ones(len(square)), 1.0, 0.75, 4,
+                           True)
     plane = np.column_stack([square, np.zeros(len(square))])
     K, R, t = np.eye(3) * 100.0, np.eye(3), np.array([0.0, 0.0, 1.0])
     refine_pose(plane, square * 100.0, K, R, t)

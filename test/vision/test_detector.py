@@ -303,6 +303,23 @@ def test_occluded_centre_is_never_misread(centre, colour):
         assert card.code == code
 
 
+def test_a_fit_without_the_centre_needs_its_dot_there_and_three_quarters_of_the_ring():
+    from pattern_locator.vision.detector import _refittable
+
+    def valid(centre, ring):
+        out = np.zeros(CFG.n_dots, dtype=bool)
+        out[0], out[1:1 + ring] = centre, True
+        return out
+
+    # With the centre: seven dots, the centre among them.
+    assert _refittable(valid(True, 6)) and not _refittable(valid(True, 5))
+    # Without it: its dot there (read from its clean inner part) and 12 of
+    # the 16 ring dots.
+    assert _refittable(valid(False, 12), centre_readable=True)
+    assert not _refittable(valid(False, 11), centre_readable=True)
+    assert not _refittable(valid(False, 16), centre_readable=False)
+
+
 def test_half_hidden_dot_is_dropped_not_shifted():
     # A pale edge (paper white) along x = -0.113 m hides half of outer point 7.
     polygon = np.array([[-0.3, -0.3], [-0.113, -0.3], [-0.113, 0.3], [-0.3, 0.3]])

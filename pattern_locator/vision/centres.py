@@ -71,6 +71,11 @@ class SpotMeasures:
     # a dot that is not valid keeps ``colour``): read when the peaks in
     # ``colour`` give no whole code. None for a card whose dots are bigger.
     far_colour: Optional[np.ndarray] = None
+    # (P, 3) a glossy card's colours, with the light a highlight added over
+    # some dots added back to their darkness (spot_kernels.lifted_peaks; a
+    # dot that is not valid keeps ``colour``): read when the peaks give no
+    # whole code. None where no dot's paper is lifted.
+    glare_colour: Optional[np.ndarray] = None
 
     def __post_init__(self) -> None:
         if self.partial is None:
@@ -260,22 +265,25 @@ def measure_spots(dot_image: DotImage, camera: Optional[CameraModel], H: np.ndar
         float(params.min_window_darkness if min_darkness is None else min_darkness),
         float(core_margin), bool(refine), int(min_valid), colour,
         _colour_table(paper.colour, params.gamma) if colour else _NO_TABLE,
-        float(params.max_channel_shift_px))
+        float(params.max_channel_shift_px),
+        np.asarray(paper.colour, dtype=np.float64) if colour else _NO_WHITE)
     (_, points, valid, readable, peak, colours, area, inside, partial, centred, major,
-     minor, far, far_colour) = rows
+     minor, far, far_colour, glared, glare_colour) = rows
     out = SpotMeasures(points, pred, valid, readable, peak, colours, area, inside, partial,
-                       centred, far_colour if far else None)
+                       centred, far_colour if far else None, glare_colour if glared else None)
     for scale, (index, size, axes, window_pred, to_plane, cell, on_card, in_image, dark,
                 uncover) in ((1, windows_1), (dot_image.scale, windows_s)):
         if uncover:
             g = _Windows(index, scale, size, axes, window_pred, to_plane, cell, on_card,
                          in_image)
             _uncovered_part(g, dark, major, minor, layout, spots, out)
-    if out.far_colour is not None:
-        # A dot that is not valid (an object touches it) keeps its peaks, or
-        # what its uncovered part gave: a sum round it would take in the object.
-        touched = ~out.valid
-        out.far_colour[touched] = out.colour[touched]
+    # A dot that is not valid (an object touches it) keeps its peaks, or what
+    # its uncovered part gave: a sum round it would take in the object, and
+    # the paper round it tells nothing of the light.
+    touched = ~out.valid
+    for other in (out.far_colour, out.glare_colour):
+        if other is not None:
+            other[touched] = out.colour[touched]
     return out
 
 
@@ -285,8 +293,9 @@ def _colour_table(white: np.ndarray, gamma: float) -> np.ndarray:
     return np.ascontiguousarray(1.0 - np.clip(levels, 0.0, 1.0) ** gamma, dtype=np.float32)
 
 
-# The table of an image without colour (the kernels' argument, not read).
+# The table and white of an image without colour (the kernels' arguments, not read).
 _NO_TABLE = np.zeros((256, 3), dtype=np.float32)
+_NO_WHITE = np.ones(3)
 
 
 # What the passes of spot_kernels.measure measure, and why (the kernels do

@@ -336,8 +336,9 @@ class Detector:
                                  max_hidden=params.max_hidden_slots if self._codes else 1,
                                  partial=spots.partial, known_codes=bool(self._codes))
         reading = read(spots.colour)
-        if spots.far_colour is not None and (reading is None or reading.code is None):
-            reading = _far_reading(reading, read(spots.far_colour))
+        for other in (spots.far_colour, spots.glare_colour):
+            if other is not None and (reading is None or reading.code is None):
+                reading = _second_reading(reading, read(other))
         if reading is None:
             return None
         valid[list(reading.not_dots)] = False
@@ -486,24 +487,27 @@ class Detector:
         return handedness(marks, black_peak) == 'ok'
 
 
-def _far_reading(peaks: Optional[Reading], sums: Optional[Reading]) -> Optional[Reading]:
+def _second_reading(peaks: Optional[Reading], second: Optional[Reading]) -> Optional[Reading]:
     """
-    Read a far card by its dots' peaks, else by their darkness summed round them.
+    Read a card by its dots' peaks, else by a second measure of their colours.
 
-    JPEG and video spread a dot of a pixel or two's colour round it, which
-    greys its peak (``SpotMeasures.far_colour``); the sums are read when
-    the peaks give no whole code. They in turn take in a neighbour's spread
-    colour and JPEG's ringing, which the peaks do not (a black dot read as
-    green), so they never overrule a slot the peaks read: they complete a
-    partial reading only where they agree with every slot and the centre it
-    saw.
+    The second measures: a far card's darkness summed round each dot (JPEG
+    and video spread a dot of a pixel or two's colour round it, which
+    greys its peak: ``SpotMeasures.far_colour``), and a glossy card's
+    peaks with a highlight's light added back (``glare_colour``). They are
+    read when the peaks give no whole code. The sums in turn take in a
+    neighbour's spread colour and JPEG's ringing, which the peaks do not
+    (a black dot read as green), and a lift stands on the paper round a
+    dot, not on the dot: so neither overrules a slot the peaks read. The
+    second reading completes a partial one only where it agrees with every
+    slot and the centre the peaks read.
     """
-    if sums is None or peaks is None:
-        return peaks or sums
-    if sums.code is None or peaks.centre_letter != sums.centre_letter or any(
-            a not in ('?', b) for a, b in zip(peaks.slot_letters, sums.slot_letters)):
+    if second is None or peaks is None:
+        return peaks or second
+    if second.code is None or peaks.centre_letter != second.centre_letter or any(
+            a not in ('?', b) for a, b in zip(peaks.slot_letters, second.slot_letters)):
         return peaks
-    return sums
+    return second
 
 
 def _centre_blob(fine, u: float, v: float, radius: float) -> Optional[int]:

@@ -89,6 +89,23 @@ _OWN_CHANNELS_SIZE = 2.5
 # instead of them; by 3 pixels, 2 more.
 _VOLUME_GROW = 1.5
 _VOLUME_BELOW = 2.5
+# A glossy card's highlight adds light over ink and paper alike, so its
+# dots' colours, read against the card's one white, fade towards grey: a
+# black centre under it read 0.6 dark in every channel, the black dots
+# beside it 0.92, and the card gave no code. Where the paper round a dot
+# (the upper quartile of its darkest channel between _PAPER_RING of its
+# radii) is brighter than the card's white (its darkest channel) by
+# _LIFT_FROM or more in linear light, the light added there is added back
+# to the dot's darkness, channel by channel: the excess of that paper's
+# upper quartile over the card's white, in linear light, which cancels a
+# highlight's light where it is even across the dot. Only dots that pass
+# every test of a dot (an object beside one would tell nothing of the
+# light); the detector reads these colours only where the peaks give no
+# whole code (:func:`lifted_peaks`). In dim, noisy light the upper quartile
+# of plain paper lies well above its median: the paper must also be
+# _LIFT_NOISE of its noise above the white.
+_LIFT_FROM = 0.1
+_LIFT_NOISE = 3.0
 
 
 @numba.njit(cache=True, nogil=False)
@@ -323,7 +340,8 @@ def windows(index, scale, predicted, axes, semi, inverse):
 @numba.njit(cache=True, nogil=False)
 def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spots, plane_xy,
                owner, half, resolution, major, minor, linv, white_level, quiet, gamma,
-               core_margin, min_darkness, points, valid, peak, area, inside):
+               core_margin, min_darkness, points, valid, peak, area, inside, lift_level,
+               lifted):
     """
     Gather each window's pixels, take the first, generous centroid and test the dots.
 
@@ -343,11 +361,13 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
 
     Writes the centre (image pixels), the tests, the peak darkness and the
     area into ``points``, ``valid``, ``peak``, ``area`` and ``inside`` at
-    ``index``; returns pixels, in_image, raw (darkness below the floor, 0
-    off the image), weight (raw in the spot's cell), cell, window, on_card
-    (on the card or within the spot's own ellipse), centres (K, 2, window
-    coordinates), top (the peak 3x3 mean darkness round the prediction)
-    and spread (K, 3: xx, xy, yy second moments, image pixels^2).
+    ``index``, and into ``lifted`` whether the paper round the spot is at
+    least ``lift_level`` (``_LIFT_FROM``); returns pixels, in_image, raw
+    (darkness below the floor, 0 off the image), weight (raw in the spot's
+    cell), cell, window, on_card (on the card or within the spot's own
+    ellipse), centres (K, 2, window coordinates), top (the peak 3x3 mean
+    darkness round the prediction) and spread (K, 3: xx, xy, yy second
+    moments, image pixels^2).
     """
     k_count = base.shape[0]
     h, w, channels = source.shape
@@ -375,10 +395,10 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
         # noise out.
         ax0, ay0 = _F32(pred[k, 0]), _F32(pred[k, 1])
         qx0, qy0 = _F32(plane_xy[i, 0]), _F32(plane_xy[i, 1])
-        level, tilt_x, tilt_y = _paper_level(
+        level, tilt_x, tilt_y, lifted[i] = _paper_level(
             source, bx, by, size, axes, k, pred[k, 0], pred[k, 1], major[i] / scale,
             minor[i] / scale, white_level[i], quiet, paper, to_plane, qx0, qy0, owner,
-            spots[i], half32, resolution32, ring)
+            spots[i], half32, resolution32, ring, lift_level)
         floor = max(_F32(0.04) * level, _F32(2.0) * quiet)
         clear = level - floor
         # A tilted paper (a highlight's flank): its light is added to ink
@@ -493,9 +513,13 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
 
 @numba.njit(cache=True, nogil=False)
 def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, quiet,
-                 buffer, to_plane, qx0, qy0, owner, spot, half, resolution, samples):
+                 buffer, to_plane, qx0, qy0, owner, spot, half, resolution, samples,
+                 lift_level):
     """
-    Return a dot's white at its centre and the paper's tilt: ``(level, gx, gy)``.
+    Return a dot's white at its centre, the paper's tilt, and whether that paper is lifted.
+
+    ``(level, gx, gy, lifted)``; ``lifted``: the paper's upper quartile
+    (its darkest channel) is at least ``lift_level`` (see ``_LIFT_FROM``).
 
     The paper: the darkest channel over the ring between ``_PAPER_RING`` of
     the dot's semi-axes (``major``, ``minor``, source pixels, along
@@ -519,6 +543,7 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
     below = (_F32(1.0) - _F32(_FLANK)) * grid_white
     count = 0
     bright = 0
+    high = 0
     # The dot's own part of the ring, for its tilt (big enough dots only).
     tilts = minor >= _TILT_MIN_SEMI_AXIS
     own = 0
@@ -538,6 +563,7 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
             buffer[count] = darkest
             count += 1
             bright += _F32(darkest) >= below
+            high += _F32(darkest) >= lift_level
             if tilts:
                 qx, qy = _plane_at(to_plane, k, x, y, ax0, ay0, qx0, qy0)
                 if _owned(owner, spot, qx, qy, half, resolution):
@@ -546,19 +572,23 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
                     samples[own, 2] = np.float64(darkest)
                     own += 1
     if count < _MIN_PAPER_PIXELS:
-        return grid_white, 0.0, 0.0
+        return grid_white, 0.0, 0.0, False
+    # The upper quartile (numpy's, interpolated between the sorted values
+    # at and after 0.75 (count - 1)) is at least a level when both those
+    # values are: when at most that many values lie below it. No sort.
+    quartile = int(0.75 * (count - 1))
+    lifted = count - high <= quartile
     if tilts:
         tilted, a, gx, gy = _paper_tilt(samples, own, major, quiet)
         if tilted:
-            return _F32(a), gx, gy
-    # The upper quartile (numpy's, interpolated between the sorted values
-    # at and after 0.75 (count - 1)): an object beside the dot darkens part
-    # of the ring. When both those values are at least `below` (the usual
-    # case, flat light), so is the quartile: no sort.
-    if count - bright <= int(0.75 * (count - 1)):
-        return grid_white, 0.0, 0.0
+            return _F32(a), gx, gy, lifted
+    # The upper quartile: an object beside the dot darkens part of the
+    # ring. When it is at least `below` (the usual case, flat light), the
+    # grid's white.
+    if count - bright <= quartile:
+        return grid_white, 0.0, 0.0, lifted
     ring = _F32(np.quantile(buffer[:count], 0.75))
-    return (ring if ring < below else grid_white), 0.0, 0.0
+    return (ring if ring < below else grid_white), 0.0, 0.0, lifted
 
 
 @numba.njit(cache=True, nogil=False)
@@ -833,7 +863,8 @@ def _group_indices(minor, big_from, big):
 @numba.njit(cache=True, nogil=False)
 def _first_group(source, scale, index, pred, U, semi, Linv, spots, plane_xy, owner, half,
                  resolution, major, minor, white_level, paper_sigma, paper_quiet, gamma,
-                 core_margin, min_darkness, points, valid, peak, area, inside):
+                 core_margin, min_darkness, points, valid, peak, area, inside, lift_level,
+                 lifted):
     """Lay out one group's windows and take their first pass (:func:`first_pass`)."""
     base, size, axes, wpred, wsemi, to_plane = windows(index, scale, pred, U, semi, Linv)
     # Noise of the source image: decimation averages scale * scale pixels.
@@ -845,7 +876,7 @@ def _first_group(source, scale, index, pred, U, semi, Linv, spots, plane_xy, own
      spread) = first_pass(source, scale, base, size, index, axes, wpred, wsemi, to_plane,
                           spots, plane_xy, owner, half, resolution, major, minor, Linv,
                           white_level, quiet, gamma, core_margin, min_darkness, points, valid,
-                          peak, area, inside)
+                          peak, area, inside, lift_level, lifted)
     return (base, size, axes, wpred, to_plane, pixels, in_image, raw, weight, cell, window,
             on_card, centres, top, spread, sigma)
 
@@ -871,7 +902,8 @@ def _uncover(index, minor, valid, readable, partial, inside):
 @numba.njit(cache=True, nogil=False)
 def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from, spots,
             plane_xy, owner, half, resolution, white_grid, grid_step, paper_sigma, paper_quiet,
-            gamma, min_darkness, core_margin, refine, min_valid, colour, table, max_shift):
+            gamma, min_darkness, core_margin, refine, min_valid, colour, table, max_shift,
+            card_white):
     """
     Measure spots where their predicted centres ``pred`` are: every pass, in one call.
 
@@ -891,12 +923,16 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     (:func:`colours`, with the darkness ``table``), the channels' shift
     (:func:`undo_channel_shift`) and, for a card of small dots
     (:func:`small_card`), its colours from each dot's darkness summed round
-    it (:func:`small_card_colours`).
+    it (:func:`small_card_colours`), and for a card whose paper round some
+    dots is brighter than its white ``card_white`` (BGR, the card's paper;
+    see ``_LIFT_FROM``), its colours with the light added there added back
+    (:func:`lifted_peaks`).
 
     Returns ``(fit, points, valid, readable, peak, colour, area, inside,
-    partial, centred, major, minor, far, far_colour)``
+    partial, centred, major, minor, far, far_colour, glared, lifted)``
     (:class:`.centres.SpotMeasures`' rows; ``far``: whether ``far_colour``
-    holds a far card's colours) and, for the groups on the image and on
+    holds a far card's colours, ``glared`` whether ``lifted`` holds the
+    lifted ones) and, for the groups on the image and on
     ``small``, each window's ``(index, size, axes, pred, to_plane, cell,
     on_card, in_image, darkness, uncover)``: what
     :func:`.centres._uncovered_part` reads of a group whose ``uncover``
@@ -910,6 +946,17 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     colour_out = np.full((n, 3), np.nan)
     far_colour = np.full((n, 3), np.nan)
     far = False
+    lifted_colour = np.full((n, 3), np.nan)
+    glared = False
+    lifted = np.zeros(n, dtype=np.bool_)
+    # The darkest channel's level of the card's white lifted by _LIFT_FROM
+    # in linear light, and by _LIFT_NOISE of the paper's noise (none for a
+    # grey image).
+    lift_level = _F32(np.inf)
+    if colour:
+        least = min(card_white[0], card_white[1], card_white[2])
+        lift_level = _F32(max(least * (1.0 + _LIFT_FROM) ** (1.0 / gamma),
+                              least + _LIFT_NOISE * paper_sigma))
     area = np.zeros(n)
     inside = np.zeros(n, dtype=np.bool_)
     partial = np.zeros(n, dtype=np.bool_)
@@ -936,10 +983,12 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     full = np.int64(1)
     g1 = _first_group(image, full, index1, pred, U, semi, Linv, spots, plane_xy, owner, half,
                       resolution, major, minor, white_level, paper_sigma, paper_quiet, gamma,
-                      core_margin, min_darkness, points, valid, peak, area, inside)
+                      core_margin, min_darkness, points, valid, peak, area, inside, lift_level,
+                      lifted)
     g2 = _first_group(small, small_scale, index2, pred, U, semi, Linv, spots, plane_xy, owner,
                       half, resolution, major, minor, white_level, paper_sigma, paper_quiet,
-                      gamma, core_margin, min_darkness, points, valid, peak, area, inside)
+                      gamma, core_margin, min_darkness, points, valid, peak, area, inside,
+                      lift_level, lifted)
     # The tolerance of the last pass's test of a dot's centre (last_pass).
     for i in range(n if fit else 0):
         reach = 0.3 * major[i] + 1.0
@@ -984,10 +1033,23 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
                                colour_out, gamma)
             if far:
                 small_card_colours(colour_out, volume, readable, far_colour)
+            lift = np.zeros((n, 3))
+            glared = _paper_lift(image, full, index1, g1[0], g1[1], g1[2], g1[3], major,
+                                 minor, lifted, valid, card_white, gamma, lift)
+            glared = _paper_lift(small, small_scale, index2, g2[0], g2[1], g2[2], g2[3], major,
+                                 minor, lifted, valid, card_white, gamma, lift) or glared
+            if glared:
+                raw = _raw_table(card_white, gamma)
+                lifted_peaks(g1[5], raw, lift, g1[9], connected1, g1[2], c1, g1[3], full,
+                             index1, major, minor, max_shift, valid, readable, colour_out,
+                             lifted_colour)
+                lifted_peaks(g2[5], raw, lift, g2[9], connected2, g2[2], c2, g2[3],
+                             small_scale, index2, major, minor, max_shift, valid, readable,
+                             colour_out, lifted_colour)
             uncover1 = _uncover(index1, minor, valid, readable, partial, inside)
             uncover2 = _uncover(index2, minor, valid, readable, partial, inside)
     return ((fit, points, valid, readable, peak, colour_out, area, inside, partial, centred,
-             major, minor, far, far_colour),
+             major, minor, far, far_colour, glared, lifted_colour),
             (index1, g1[1], g1[2], g1[3], g1[4], g1[9], g1[11], g1[6], dark1, uncover1),
             (index2, g2[1], g2[2], g2[3], g2[4], g2[9], g2[11], g2[6], dark2, uncover2))
 
@@ -1164,15 +1226,8 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
             strength[i, ch] = t
             channel_at[i, ch, 0] = (sx[ch] / t + base[k, 0]) * scale + off
             channel_at[i, ch, 1] = (sy[ch] / t + base[k, 1]) * scale + off
-        sure = valid[i]
-        grow = max_shift if sure else 0.0
-        g0 = (0.6 * major[i] + 0.7 + grow) / scale
-        g1 = (0.6 * minor[i] + 0.7 + grow) / scale
-        a0 = centres[k, 0] if sure else pred[k, 0]
-        a1 = centres[k, 1] if sure else pred[k, 1]
-        ca, cb = _ellipse_origin(axes, k, a0, a1)
-        sa, sb = _inverse_squares(g0, g1)
-        x0, x1, y0, y1 = _span(axes, k, a0, a1, g0, g1, size)
+        a0, a1, ca, cb, sa, sb, x0, x1, y0, y1 = _peak_region(
+            axes, k, centres, pred, major[i], minor[i], max_shift, valid[i], scale, size)
         count = 0
         mean[:] = 0.0
         squares[:] = 0.0
@@ -1217,6 +1272,122 @@ def colours(pixels, table, cell, window, connected, axes, centres, pred, base, s
         if readable[i] and not valid[i]:
             readable[i] = spread[k] <= 1.3 * typical + 0.02
     return dark
+
+
+@numba.njit(cache=True, nogil=False)
+def _peak_region(axes, k, centres, pred, major, minor, max_shift, sure, scale, size):
+    """
+    Where a dot's colour peaks are taken (:func:`colours`), in window ``k``.
+
+    Its inner part grown by the largest channel shift round its centre (a
+    dot not ``sure``: not grown, round its prediction). Returns the centre,
+    the ellipse's origin and inverse squared semi-axes, and its pixel span.
+    """
+    grow = max_shift if sure else 0.0
+    g0 = (0.6 * major + 0.7 + grow) / scale
+    g1 = (0.6 * minor + 0.7 + grow) / scale
+    a0 = centres[k, 0] if sure else pred[k, 0]
+    a1 = centres[k, 1] if sure else pred[k, 1]
+    ca, cb = _ellipse_origin(axes, k, a0, a1)
+    sa, sb = _inverse_squares(g0, g1)
+    x0, x1, y0, y1 = _span(axes, k, a0, a1, g0, g1, size)
+    return a0, a1, ca, cb, sa, sb, x0, x1, y0, y1
+
+
+@numba.njit(cache=True, nogil=False)
+def _paper_lift(source, scale, index, base, size, axes, pred, major, minor, lifted, valid,
+                card_white, gamma, lift):
+    """
+    Write each lifted, ``valid`` dot's paper excess over the card's white into ``lift``.
+
+    Per channel, in linear light: the upper quartile of the paper round
+    the dot (between ``_PAPER_RING`` of its radii, within the image: the
+    first pass's ring) over ``card_white``, less one; 0 where below it.
+    Returns whether any dot has some.
+    """
+    h, w, channels = source.shape
+    any_lift = False
+    if channels != 3:
+        return any_lift
+    values = np.empty((size * size, 3), dtype=np.float32)
+    for k in range(index.shape[0]):
+        i = index[k]
+        if not (lifted[i] and valid[i]):
+            continue
+        c0, c1 = pred[k, 0], pred[k, 1]
+        a, b = major[i] / scale, minor[i] / scale
+        ca, cb = _ellipse_origin(axes, k, c0, c1)
+        ia, ib = _inverse_squares(_PAPER_RING[0] * a, _PAPER_RING[0] * b)
+        oa, ob = _inverse_squares(_PAPER_RING[1] * a, _PAPER_RING[1] * b)
+        x0, x1, y0, y1 = _span(axes, k, c0, c1, _PAPER_RING[1] * a, _PAPER_RING[1] * b, size)
+        count = 0
+        for y in range(y0, y1):
+            v = base[k, 1] + y
+            if v < 0 or v >= h:
+                continue
+            for x in range(x0, x1):
+                u = base[k, 0] + x
+                if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
+                        or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
+                    continue
+                for ch in range(3):
+                    values[count, ch] = source[v, u, ch]
+                count += 1
+        if count < _MIN_PAPER_PIXELS:
+            continue
+        for ch in range(3):
+            top = np.quantile(values[:count, ch], 0.75)
+            lift[i, ch] = max((top / card_white[ch]) ** gamma - 1.0, 0.0)
+            any_lift = any_lift or lift[i, ch] > 0.0
+    return any_lift
+
+
+@numba.njit(cache=True, nogil=False)
+def _raw_table(white, gamma):
+    """Each level's darkness per channel (256, 3) against ``white``, linear, not clipped at 0."""
+    table = np.empty((256, 3), dtype=np.float32)
+    for ch in range(3):
+        for level in range(256):
+            table[level, ch] = _F32(1.0 - (level / white[ch]) ** gamma)
+    return table
+
+
+@numba.njit(cache=True, nogil=False)
+def lifted_peaks(pixels, raw, lift, cell, connected, axes, centres, pred, scale, index, major,
+                 minor, max_shift, valid, readable, colour, out):
+    """
+    Write each readable dot's colour peaks with its paper's ``lift`` added back into ``out``.
+
+    Where :func:`colours` takes its peaks (:func:`_peak_region`), the 3x3
+    mean of each channel's darkness against the card's white (``raw``,
+    :func:`_raw_table`: a lifted pixel may be brighter than that white)
+    plus the dot's lift in that channel (:func:`_paper_lift`), at least 0.
+    A readable dot without lift keeps ``colour``; the others stay NaN.
+    """
+    k_count, size = pixels.shape[0], pixels.shape[1]
+    dark = np.empty((size, size), dtype=np.float32)
+    for k in range(k_count):
+        i = index[k]
+        if not readable[i]:
+            continue
+        if not (lift[i, 0] > 0.0 or lift[i, 1] > 0.0 or lift[i, 2] > 0.0):
+            for ch in range(3):
+                out[i, ch] = colour[i, ch]
+            continue
+        a0, a1, ca, cb, sa, sb, x0, x1, y0, y1 = _peak_region(
+            axes, k, centres, pred, major[i], minor[i], max_shift, valid[i], scale, size)
+        for ch in range(3):
+            up = _F32(lift[i, ch])
+            for y in range(size):
+                for x in range(size):
+                    dark[y, x] = max(raw[pixels[k, y, x, ch], ch] + up, _F32(0.0))
+            best = _F32(0.0)
+            for y in range(y0, y1):
+                for x in range(x0, x1):
+                    if cell[k, y, x] and connected[k, y, x] \
+                            and _ellipse_at(axes, k, x, y, ca, cb, sa, sb) <= 1.0:
+                        best = max(best, _box3_at(dark, x, y))
+            out[i, ch] = best
 
 
 @numba.njit(cache=True, nogil=False)

@@ -1,7 +1,8 @@
 """
 Dot centres that a glossy card's highlight or shifted colour channels do not pull off.
 
-(And a card whose centre dot a highlight spoils, found by its ring.)
+(And a card whose centre dot a highlight spoils, found by its ring; and
+dots whose colours a highlight fades, read with its light added back.)
 
 Both biases are coherent over a card (every dot on a highlight's flank
 moves away from it; every green dot towards the red image), so the pose
@@ -86,6 +87,43 @@ def test_a_small_highlight_across_the_centre_dot_leaves_the_card_found_by_its_ri
     T = card_pose_facing(distance, 25.0, 60.0, 5.0, (0.0, 0.0), camera)
     true_centre = camera.project(T.t[None])[0]
     assert np.hypot(*(detection.centre_px - true_centre)) < 0.5
+
+
+BLACK_CENTRE = CFG.encode(2, 12, 5)     # K-KRGRBGGB
+RISKY_GREEN = CFG.encode(6, 79, 9)      # G-KBBBRBBR: a green centre, no green on the ring
+
+
+@pytest.mark.parametrize('camera, distance, centre, sigma, level', [
+    (VGA, 1.5, (0.0, 0.0), 0.03, 0.3), (VGA, 3.5, (0.02, 0.01), 0.03, 0.6),
+    (HD, 1.5, (0.02, 0.01), 0.03, 0.45), (HD, 2.5, (0.02, 0.01), 0.05, 0.45)])
+def test_a_highlight_over_a_black_centre_is_read_with_its_light_added_back(
+        camera, distance, centre, sigma, level):
+    # The highlight adds light over the centre: it read 0.6 dark in every
+    # channel against the card's white, the black ring dots 0.9, and no code
+    # came of it. Before: lost. The light added there (the paper round each
+    # dot against the card's white, spot_kernels.lifted_peaks) is added back
+    # where the peaks give no code.
+    texture = GlossyTexture(DotCardTexture(CFG, BLACK_CENTRE), centre, sigma, level)
+    card, errors, sigmas = located(camera, distance, texture, BLACK_CENTRE)
+    assert card is not None
+    assert np.nanmax(errors) < 0.6 and sigmas < 4.0
+
+
+def test_a_green_centre_under_a_highlight_is_never_read_black():
+    # Light added back makes every channel of a dot darker alike, towards
+    # black: a green centre with no green dot on the ring is the card it
+    # could turn into a wrong floor.
+    for camera, distance, level in ((VGA, 1.5, 0.45), (VGA, 3.5, 0.6), (HD, 2.5, 0.3),
+                                    (HD, 3.5, 0.75)):
+        for centre, sigma in (((0.0, 0.0), 0.03), ((0.02, 0.01), 0.05)):
+            texture = GlossyTexture(DotCardTexture(CFG, RISKY_GREEN), centre, sigma, level)
+            T = card_pose_facing(distance, 25.0, 60.0, 5.0, (0.0, 0.0), camera)
+            image = render_scene(camera, [CardPlacement(T, texture)], RenderOptions(
+                gain=0.8, noise_sigma=1.5, defocus_sigma_px=0.6, seed=3,
+                colour_cast=(1.2, 0.85, 1.2))).image
+            codes = [c.detection.code for c in LOCATOR.locate(image, camera)
+                     if c.detection.code is not None]
+            assert codes in ([], [RISKY_GREEN]), (camera.width, distance, level, centre)
 
 
 @pytest.mark.parametrize('camera, distance, shift', [

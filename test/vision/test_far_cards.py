@@ -28,7 +28,7 @@ from pattern_locator.vision import detector as detector_module
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.centres import card_paper, measure_spots
 from pattern_locator.vision.code_reading import read_code, Reading
-from pattern_locator.vision.detector import _far_reading, Detector, DetectorParams
+from pattern_locator.vision.detector import _second_reading, Detector, DetectorParams
 from pattern_locator.vision.dots import segment
 import pytest
 
@@ -242,20 +242,20 @@ def test_a_dots_sums_never_overrule_a_slot_its_peaks_read():
     code = CFG.encode(2, 17, 3)
     ring, centre = code.ring, code.centre
     whole = reading(code, ring, centre)
-    assert _far_reading(None, whole) is whole
-    assert _far_reading(None, None) is None
+    assert _second_reading(None, whole) is whole
+    assert _second_reading(None, None) is None
     # Completes a partial reading that it agrees with...
     for seen in (ring[:2] + '?' + ring[3:], ring[:2] + '??' + ring[4:]):
         partial = reading(None, seen, centre)
-        assert _far_reading(partial, whole) is whole
-        assert _far_reading(partial, None) is partial
+        assert _second_reading(partial, whole) is whole
+        assert _second_reading(partial, None) is partial
     # ...but not one it contradicts in a slot or the centre, nor with a partial one.
     other_ink = 'R' if ring[1] != 'R' else 'G'
     other_centre = 'B' if centre != 'B' else 'G'
     for other in (reading(None, ring[0] + other_ink + '?' + ring[3:], centre),
                   reading(None, ring[:2] + '?' + ring[3:], other_centre)):
-        assert _far_reading(other, whole) is other
-    assert _far_reading(partial, reading(None, ring[:3] + '?' + ring[4:], centre)) is partial
+        assert _second_reading(other, whole) is other
+    assert _second_reading(partial, reading(None, ring[:3] + '?' + ring[4:], centre)) is partial
 
 
 @pytest.mark.parametrize('seed, index', [(24, 11), (21, 26), (23, 21)])

@@ -130,7 +130,7 @@ def first_pass(image, base, size, pred, semi=(3.0, 2.0), axes=(2.0, 1.5)):
         np.zeros((1, 1), np.int16), 10.0, 100.0, np.full(k, float(axes[0])),
         np.full(k, float(axes[1])), 0.001 * eye,
         dot_image.white_at(*(np.asarray(pred, float) + base).T).astype(np.float32),
-        np.float32(1.0), 2.2, 1.0, 0.12, *out)
+        np.float32(1.0), 2.2, 1.0, 0.12, *out, np.float32(np.inf), np.zeros(k, bool))
     return dot_image, result, out
 
 
@@ -174,7 +174,7 @@ def test_flat_paper_and_an_object_beside_a_dot_tilt_nothing():
             np.float32(image[:, :49].max()), np.float32(1.0), np.empty(625, np.uint8),
             0.001 * np.eye(2, dtype=np.float32)[None], np.float32(0.0), np.float32(0.0),
             np.zeros((1, 1), np.int16), 0, np.float32(10.0), np.float32(100.0),
-            np.empty((625, 3)))
+            np.empty((625, 3)), np.float32(np.inf))
         assert level[1] == 0.0 and level[2] == 0.0
     _, _, (points, _, _, _, _) = first_pass(flat, [[28, 28]], 25, pred, semi=(11.0, 11.0),
                                             axes=(5.0, 5.0))
@@ -237,3 +237,36 @@ def test_a_far_cards_colours_take_their_direction_from_sums_and_strength_from_pe
     assert spot_kernels.small_card(small, small, valid)
     assert not spot_kernels.small_card(big, big, valid)
     assert not spot_kernels.small_card(small, small, np.zeros(3, dtype=bool))
+
+
+def test_the_lifts_table_is_the_colour_table_below_the_white_and_goes_on_above_it():
+    from pattern_locator.vision.centres import _colour_table
+
+    white = np.array([180.0, 200.0, 220.0])
+    raw = spot_kernels._raw_table(white, 2.2)
+    table = _colour_table(white, 2.2)
+    below = np.arange(256)[:, None] < white[None, :]
+    assert np.allclose(raw[below], np.broadcast_to(table, raw.shape)[below], atol=1e-6)
+    # Paper a highlight lifts above the card's white: darkness below 0,
+    # which the lift then brings back up.
+    assert (raw[~below] <= 1e-6).all() and raw[255, 0] < -0.5
+
+
+def test_paper_is_lifted_when_its_upper_quartile_reaches_the_level():
+    # The dot of glossy_dot on paper of level 210-225 (encoded): its ring's
+    # upper quartile reaches 200, not 230; an object over part of the ring
+    # leaves that quartile on the paper.
+    flat = glossy_dot(0.0)
+    touched = flat.copy()
+    touched[:, 50:] = 40
+    paper = int(flat[5, 5, 0])
+    assert 210 <= paper <= 225
+    for image in (flat, touched):
+        for lift_level, lifted in ((200.0, True), (230.0, False)):
+            level = spot_kernels._paper_level(
+                image, 28, 28, 25, np.eye(2, dtype=np.float32)[None], 0, 12.3, 11.6, 5.0, 5.0,
+                np.float32(image[:, :49].max()), np.float32(1.0), np.empty(625, np.uint8),
+                0.001 * np.eye(2, dtype=np.float32)[None], np.float32(0.0), np.float32(0.0),
+                np.zeros((1, 1), np.int16), 0, np.float32(10.0), np.float32(100.0),
+                np.empty((625, 3)), np.float32(lift_level))
+            assert level[3] == lifted, (lift_level, image is touched)

@@ -951,10 +951,10 @@ def measure(image, small, small_scale, pred, L, radii, margin, largest, big_from
     lifted = np.zeros(n, dtype=np.bool_)
     # The darkest channel's level of the card's white lifted by _LIFT_FROM
     # in linear light, and by _LIFT_NOISE of the paper's noise (none for a
-    # grey image).
+    # grey image, or a white with a channel at 0: no light to measure by).
     lift_level = _F32(np.inf)
-    if colour:
-        least = min(card_white[0], card_white[1], card_white[2])
+    least = min(card_white[0], card_white[1], card_white[2])
+    if colour and least > 0.0:
         lift_level = _F32(max(least * (1.0 + _LIFT_FROM) ** (1.0 / gamma),
                               least + _LIFT_NOISE * paper_sigma))
     area = np.zeros(n)

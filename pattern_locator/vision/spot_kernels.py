@@ -512,6 +512,31 @@ def first_pass(source, scale, base, size, index, axes, pred, semi, to_plane, spo
 
 
 @numba.njit(cache=True, nogil=False)
+def _paper_ring(axes, k, c0, c1, major, minor, size):
+    """
+    Lay out the paper ring round a dot: between ``_PAPER_RING`` of its semi-axes.
+
+    ``major``, ``minor`` (source pixels) along ``axes[k]`` round (``c0``,
+    ``c1``) in a window of ``size``. Returns the ellipses' origin, the
+    inner and outer inverse squared semi-axes and the ring's span in the
+    window (:func:`_in_paper_ring` tests a pixel of it).
+    """
+    ca, cb = _ellipse_origin(axes, k, c0, c1)
+    ia, ib = _inverse_squares(_PAPER_RING[0] * major, _PAPER_RING[0] * minor)
+    oa, ob = _inverse_squares(_PAPER_RING[1] * major, _PAPER_RING[1] * minor)
+    x0, x1, y0, y1 = _span(axes, k, c0, c1, _PAPER_RING[1] * major, _PAPER_RING[1] * minor,
+                           size)
+    return ca, cb, ia, ib, oa, ob, x0, x1, y0, y1
+
+
+@numba.njit(cache=True, nogil=False)
+def _in_paper_ring(axes, k, x, y, ca, cb, ia, ib, oa, ob):
+    """Tell whether window pixel (x, y) lies in the ring :func:`_paper_ring` laid out."""
+    return not (_ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0
+                or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0)
+
+
+@numba.njit(cache=True, nogil=False)
 def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white, quiet,
                  buffer, to_plane, qx0, qy0, owner, spot, half, resolution, samples,
                  lift_level):
@@ -535,11 +560,7 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
     paper's upper quartile where that lies more than ``_FLANK`` below it.
     """
     h, w, channels = source.shape
-    ca, cb = _ellipse_origin(axes, k, c0, c1)
-    ia, ib = _inverse_squares(_PAPER_RING[0] * major, _PAPER_RING[0] * minor)
-    oa, ob = _inverse_squares(_PAPER_RING[1] * major, _PAPER_RING[1] * minor)
-    x0, x1, y0, y1 = _span(axes, k, c0, c1, _PAPER_RING[1] * major, _PAPER_RING[1] * minor,
-                           size)
+    ca, cb, ia, ib, oa, ob, x0, x1, y0, y1 = _paper_ring(axes, k, c0, c1, major, minor, size)
     below = (_F32(1.0) - _F32(_FLANK)) * grid_white
     count = 0
     bright = 0
@@ -554,8 +575,7 @@ def _paper_level(source, bx, by, size, axes, k, c0, c1, major, minor, grid_white
             continue
         for x in range(x0, x1):
             u = bx + x
-            if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
-                    or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
+            if u < 0 or u >= w or not _in_paper_ring(axes, k, x, y, ca, cb, ia, ib, oa, ob):
                 continue
             darkest = np.uint8(255)
             for ch in range(channels):
@@ -1309,17 +1329,17 @@ def _paper_lift(source, scale, index, base, size, axes, pred, major, minor, lift
     any_lift = False
     if channels != 3:
         return any_lift
-    values = np.empty((size * size, 3), dtype=np.float32)
+    # The buffer only for a group with a lifted dot (seldom: a highlight).
+    values = np.empty((0, 3), dtype=np.float32)
     for k in range(index.shape[0]):
         i = index[k]
         if not (lifted[i] and valid[i]):
             continue
+        if values.shape[0] == 0:
+            values = np.empty((size * size, 3), dtype=np.float32)
         c0, c1 = pred[k, 0], pred[k, 1]
-        a, b = major[i] / scale, minor[i] / scale
-        ca, cb = _ellipse_origin(axes, k, c0, c1)
-        ia, ib = _inverse_squares(_PAPER_RING[0] * a, _PAPER_RING[0] * b)
-        oa, ob = _inverse_squares(_PAPER_RING[1] * a, _PAPER_RING[1] * b)
-        x0, x1, y0, y1 = _span(axes, k, c0, c1, _PAPER_RING[1] * a, _PAPER_RING[1] * b, size)
+        ca, cb, ia, ib, oa, ob, x0, x1, y0, y1 = _paper_ring(
+            axes, k, c0, c1, major[i] / scale, minor[i] / scale, size)
         count = 0
         for y in range(y0, y1):
             v = base[k, 1] + y
@@ -1327,8 +1347,8 @@ def _paper_lift(source, scale, index, base, size, axes, pred, major, minor, lift
                 continue
             for x in range(x0, x1):
                 u = base[k, 0] + x
-                if u < 0 or u >= w or _ellipse_at(axes, k, x, y, ca, cb, oa, ob) > 1.0 \
-                        or _ellipse_at(axes, k, x, y, ca, cb, ia, ib) <= 1.0:
+                if u < 0 or u >= w \
+                        or not _in_paper_ring(axes, k, x, y, ca, cb, ia, ib, oa, ob):
                     continue
                 for ch in range(3):
                     values[count, ch] = source[v, u, ch]

@@ -47,6 +47,10 @@ _FAR_EXTRA = 3
 _FAR_MIN_CONTRAST = 9.0     # noise sigmas
 # ...or this fraction of the white, whatever the noise: ink is that dark.
 _FAR_INK_DARKNESS = 0.4
+# Of the tried, the darkest this many up to this area (image pixels) that
+# show no ring decimated are looked at again at full resolution.
+_FAR_FULL_TRIES = 2
+_FAR_FULL_MAX_AREA = 32.0
 
 
 @dataclass(frozen=True)
@@ -115,10 +119,12 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     are paler than the segmentation's threshold, so the evidence count of
     :func:`rank_candidates` sees no ring. The darkest small blobs not yet
     examined (``taken``) nor inside a card found (``claimed``) are looked at
-    again with a lenient threshold (:meth:`DotImage.faint_rings`); those
-    with a ring's worth of faint spots round them are candidates. At most
-    ``_FAR_TRIES`` windows are looked at and ``_FAR_EXTRA`` returned: the
-    cost per image is bounded.
+    again with a lenient threshold (:meth:`DotImage.faint_rings`: on the
+    decimated image, and where no ring shows there, at full resolution);
+    those with a ring's worth of faint spots round them are candidates. At most
+    ``_FAR_TRIES`` windows are looked at (``_FAR_FULL_TRIES`` of them again
+    at full resolution) and ``_FAR_EXTRA`` returned: the cost per image is
+    bounded.
     """
     blobs = dot_image.blobs
     if blobs.scale == 1 or len(blobs) == 0:
@@ -151,9 +157,20 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     radius = np.sqrt(blobs.area[ci] / math.pi)
     extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
     reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
+    max_area = 2.0 * blobs.area[ci] + 8.0
     ring_like, n_ring, own = dot_image.faint_rings(
-        u[pick], v[pick], reach, 2.0 * blobs.area[ci] + 8.0, white[pick], noise[pick], radius,
-        MIN_NEIGHBOURS)
+        u[pick], v[pick], reach, max_area, white[pick], noise[pick], radius, MIN_NEIGHBOURS)
+    # Softly focused (an analog camera, a lens focused nearer), a far card's
+    # dots merge once decimated into one ring-shaped spot: the darkest few
+    # small ones that show no ring there are looked at again at full
+    # resolution, where the dots are apart (four times the pixels a window:
+    # few, and small, to keep the cost of a frame with none).
+    again = np.flatnonzero(~ring_like & (blobs.area[ci] <= _FAR_FULL_MAX_AREA))[:_FAR_FULL_TRIES]
+    if len(again):
+        pa = pick[again]
+        ring_like[again], n_ring[again], own[again] = dot_image.faint_rings(
+            u[pa], v[pa], reach[again], max_area[again], white[pa], noise[pa], radius[again],
+            MIN_NEIGHBOURS, decimated=False)
     # A centre dot is a dot, not the darkest part of a bigger dark thing,
     # and its rings' spots are all round it: in half the eight directions
     # or more, their mean near the centre. Darkest first; a crowd of faint

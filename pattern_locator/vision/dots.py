@@ -163,7 +163,7 @@ class DotImage:
 
     def faint_rings(self, u: np.ndarray, v: np.ndarray, reach: np.ndarray,
                     max_area: np.ndarray, white: np.ndarray, noise: np.ndarray,
-                    radius: np.ndarray, min_spots: int
+                    radius: np.ndarray, min_spots: int, decimated: bool = True
                     ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """
         Tell whether faint dark spots ring each of the small blobs at (u, v).
@@ -178,14 +178,18 @@ class DotImage:
         ``noise`` are :meth:`white_at` and :meth:`noise_at` there. Returns
         per blob (ring-like, number of ring spots, area of the spot at the
         blob itself: 0 if it is not dark at this threshold). One compiled
-        call for all (:func:`.card_kernels.faint_rings`).
+        call for all (:func:`.card_kernels.faint_rings`). ``decimated=False``
+        looks at the full-resolution image instead, with the full
+        resolution's noise: a softly focused far card's dots, a pixel or two
+        apart once decimated, merge there into one ring-shaped spot.
         """
         u, v, reach, max_area, white, noise, radius = (
             np.ascontiguousarray(a, dtype=np.float64)
             for a in (u, v, reach, max_area, white, noise, radius))
         return card_kernels.faint_rings(
-            self.kernel_view(decimated=True), u, v, reach, max_area, white, noise, radius,
-            int(self.scale), _FAINT_RATIO, int(self.params.min_white), int(min_spots))
+            self.kernel_view(decimated=decimated), u, v, reach, max_area, white, noise, radius,
+            int(self.scale) if decimated else 1, _FAINT_RATIO, int(self.params.min_white),
+            int(min_spots))
 
     def kernel_view(self, decimated: bool) -> np.ndarray:
         """

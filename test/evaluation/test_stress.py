@@ -17,8 +17,11 @@ CONFIG = load_pattern_config()
 def test_every_condition_of_the_issue_is_a_row():
     names = set(stress.CONDITIONS)
     for needed in ('textures', 'dark noisy', 'photos', 'chromatic', 'mirror', 'dim', 'blur',
-                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer', 'mottled', 'glare'):
+                   'occlusion', 'interlace', 'far', 'yuv422', 'bayer', 'mottled', 'glare',
+                   'far soft'):
         assert needed in names
+    # A condition added later comes last: the others keep their seeded frames.
+    assert stress.CONDITIONS[-1] == 'far soft'
     lights = [n for n in stress.CONDITIONS if n.startswith('light ')]
     assert len(lights) >= 13 and {'light magenta', 'light red wall'} <= set(lights)
     gains = np.array([g for _, g in stress.LIGHTS])
@@ -78,13 +81,18 @@ def test_raw_encodings_go_through_the_node_decoder():
 
 
 def test_frames_are_seeded_and_fit_their_condition():
-    frames = stress.make_frames(CONFIG, 2, 3, ['far', 'mirror', 'interlace', 'light magenta'])
-    again = stress.make_frames(CONFIG, 2, 3, ['far', 'mirror', 'interlace', 'light magenta'])
+    names = ['far', 'mirror', 'interlace', 'light magenta', 'far soft']
+    frames = stress.make_frames(CONFIG, 2, 3, names)
+    again = stress.make_frames(CONFIG, 2, 3, names)
     assert frames == again
-    assert len(frames) == 4 * 2 * len(bench_cameras())
+    assert len(frames) == 5 * 2 * len(bench_cameras())
     for f in frames:
-        if f.condition == 'far':
+        if f.condition.startswith('far'):
             assert 5.5 <= f.distance <= 8.0
+            # The soft lens's defocus beyond the ordinary frames' 0.3-1 px.
+            soft = f.condition == 'far soft'
+            assert (1.0 <= f.options.defocus_sigma_px <= 1.5) if soft \
+                else f.options.defocus_sigma_px <= 1.0
         else:
             assert 1.25 <= f.distance <= 4.0
         assert f.expected == (f.condition != 'mirror')
@@ -167,6 +175,16 @@ def test_a_rate_comes_with_its_interval_and_cards_left_to_the_localizer_are_told
     table = stress.stress_table({'far': far})
     assert 'far: AprilTag with decimate 1 finds 100.0 % (0 wrong ids); ours: 2 more of 20' \
         in table, table
+    # The soft lens's far frames: the same line, and a target of their own.
+    soft = stress.Row('far soft', stress.make_frames(CONFIG, 10, 1, ['far soft']), dots,
+                      [stress.Result(time_ms=2.0)] * 20,
+                      [stress.Result(found=i < 18, time_ms=3.0) for i in range(20)])
+    assert 'far soft: AprilTag with decimate 1 finds 90.0 %' in stress.stress_table(
+        {'far soft': soft})
+    targets = stress.targets_table({'far': far, 'far soft': soft})
+    assert '5.5-8 m: >= AprilTag decimate 1 + 10 points (max 100 %)' in targets
+    line = next(x for x in targets.splitlines() if x.startswith('5.5-8 m, soft lens'))
+    assert '85.0 (64-95) vs 90.0 %' in line and line.endswith('NOT MET')
     assert all(math.isnan(x) for x in stress._interval([], []))
 
 

@@ -29,7 +29,7 @@ from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.centres import card_paper, measure_spots
 from pattern_locator.vision.code_reading import read_code, Reading
 from pattern_locator.vision.detector import _second_reading, Detector, DetectorParams
-from pattern_locator.vision.dots import segment
+from pattern_locator.vision.dots import DotImage, segment
 import pytest
 
 CFG = PatternConfig()
@@ -139,6 +139,59 @@ def test_far_candidates_are_bounded_on_twenty_thousand_blobs():
     extra = card_stage.far_candidates(dot_image, CFG, np.zeros(0, dtype=np.intp),
                                       np.zeros(n, dtype=bool))
     assert len(extra) <= card_stage._FAR_EXTRA
+
+
+# Softly focused (defocus 1.2-1.45 px: an analog camera, a lens focused
+# nearer), 6.3-7.8 m: decimated, the ring dots merge into one ring-shaped
+# faint spot round the centre, so the faint look saw no ring and the centre
+# was no candidate (issue 9's twenty-third round).
+SOFT = [
+    {'camera': HD, 'distance': 6.3103, 'tilt': 17.4491, 'azimuth': 94.266, 'roll': -29.62,
+     'offset': (-172.495, 94.925), 'ids': (7, 19, 9), 'gain': 0.8569,
+     'colour_cast': (1.0223, 0.9715, 0.9534), 'gradient': 0.2159, 'gradient_angle_deg': 307.16,
+     'defocus_sigma_px': 1.4035, 'noise_sigma': 2.7, 'shot_noise': 0.00226,
+     'crosstalk': 0.0598, 'background': 'clutter', 'seed': 87065924},
+    {'camera': HD, 'distance': 6.4975, 'tilt': 0.6279, 'azimuth': 339.47, 'roll': -17.96,
+     'offset': (-18.923, -206.692), 'ids': (10, 28, 4), 'gain': 0.7548,
+     'colour_cast': (0.9965, 1.0477, 0.9889), 'gradient': 0.2095, 'gradient_angle_deg': 201.1,
+     'defocus_sigma_px': 1.4419, 'noise_sigma': 2.491, 'shot_noise': 0.00099,
+     'crosstalk': 0.212, 'background': 'wall', 'seed': 105889547},
+    {'camera': VGA, 'distance': 7.2873, 'tilt': 31.1436, 'azimuth': 269.263, 'roll': 16.649,
+     'offset': (-246.116, -83.88), 'ids': (1, 30, 1), 'gain': 1.0055,
+     'colour_cast': (0.9735, 0.9928, 1.0232), 'gradient': 0.2424, 'gradient_angle_deg': 330.28,
+     'defocus_sigma_px': 1.226, 'noise_sigma': 1.406, 'shot_noise': 0.00463,
+     'crosstalk': 0.1506, 'jpeg_quality': 95, 'background': 'clutter', 'seed': 433364653},
+    {'camera': VGA, 'distance': 7.8111, 'tilt': 17.4796, 'azimuth': 186.56, 'roll': 2.504,
+     'offset': (-18.126, -40.252), 'ids': (8, 3, 4), 'gain': 0.6502,
+     'colour_cast': (0.9564, 1.0224, 0.9707), 'gradient': 0.1165, 'gradient_angle_deg': 97.41,
+     'defocus_sigma_px': 1.2991, 'noise_sigma': 2.109, 'shot_noise': 0.00347,
+     'crosstalk': 0.079, 'background': 'wall', 'seed': 1004195957},
+]
+
+
+@pytest.mark.parametrize('frame', SOFT, ids=['hd-clutter', 'hd-wall', 'vga-clutter', 'vga-wall'])
+def test_soft_far_card_whose_dots_merge_once_decimated_is_found(monkeypatch, frame):
+    image, dots = far_frame(**frame)
+    dot_image = segment(image, DETECTOR.params)
+    blobs = dot_image.blobs
+    centre = int(np.argmin(np.hypot(blobs.u - dots[0, 0], blobs.v - dots[0, 1])))
+    assert math.hypot(blobs.u[centre] - dots[0, 0], blobs.v[centre] - dots[0, 1]) < 2.0
+
+    def far_ones():
+        ranked = card_stage.rank_candidates(blobs, CFG, DETECTOR.params,
+                                            dot_image.noise_at(blobs.u, blobs.v))
+        assert centre not in ranked
+        return card_stage.far_candidates(dot_image, CFG, ranked, np.zeros(len(blobs), bool))
+
+    # The class: looked at decimated only, no ring, no candidate, no card.
+    faint_rings = DotImage.faint_rings
+    with monkeypatch.context() as patch:
+        patch.setattr(DotImage, 'faint_rings',
+                      lambda *args, decimated=True: faint_rings(*args, decimated=True))
+        assert centre not in far_ones()
+        assert ids_found(image, frame['camera']) == []
+    assert centre in far_ones()
+    assert ids_found(image, frame['camera']) == [frame['ids']]
 
 
 def stress_far_frame(seed, index):

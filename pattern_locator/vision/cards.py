@@ -48,7 +48,8 @@ _FAR_MIN_CONTRAST = 9.0     # noise sigmas
 # ...or this fraction of the white, whatever the noise: ink is that dark.
 _FAR_INK_DARKNESS = 0.4
 # Of the tried, the darkest this many up to this area (image pixels) that
-# show no ring decimated are looked at again at full resolution.
+# show no ring decimated are looked at again at full resolution; blobs up
+# to this area are the ones zoomed where no card was found (zoom_spots).
 _FAR_FULL_TRIES = 2
 _FAR_FULL_MAX_AREA = 32.0
 
@@ -131,6 +132,48 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
         return np.zeros(0, dtype=np.intp)
     ok = (blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_MAX_AREA) & ~claimed
     ok[np.asarray(taken, dtype=np.intp)] = False
+    ci, white, noise = ink_spots(dot_image, ok, _FAR_TRIES)
+    if len(ci) == 0:
+        return np.zeros(0, dtype=np.intp)
+    u, v = blobs.u[ci], blobs.v[ci]
+    rho_out = config.ring_radii[0] / config.centre_dot_radius
+    # The reach of rank_candidates, half as big again: a centre this
+    # small, pale at its rim, comes out smaller than it is.
+    radius = np.sqrt(blobs.area[ci] / math.pi)
+    extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
+    reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
+    max_area = 2.0 * blobs.area[ci] + 8.0
+    ring_like, n_ring, own = dot_image.faint_rings(
+        u, v, reach, max_area, white, noise, radius, MIN_NEIGHBOURS)
+    # Softly focused (an analog camera, a lens focused nearer), a far card's
+    # dots merge once decimated into one ring-shaped spot: the darkest few
+    # small ones that show no ring there are looked at again at full
+    # resolution, where the dots are apart (four times the pixels a window:
+    # few, and small, to keep the cost of a frame with none).
+    again = np.flatnonzero(~ring_like & (blobs.area[ci] <= _FAR_FULL_MAX_AREA))[:_FAR_FULL_TRIES]
+    if len(again):
+        ring_like[again], n_ring[again], own[again] = dot_image.faint_rings(
+            u[again], v[again], reach[again], max_area[again], white[again], noise[again],
+            radius[again], MIN_NEIGHBOURS, decimated=False)
+    # A centre dot is a dot, not the darkest part of a bigger dark thing,
+    # and its rings' spots are all round it: in half the eight directions
+    # or more, their mean near the centre. Darkest first; a crowd of faint
+    # spots (more than a card's two rings and marks, and some) says
+    # texture: last.
+    found = ring_like & ~(own > 6.0 * blobs.area[ci])
+    crowd = n_ring[found] > 3 * RING_POINTS
+    return ci[found][np.argsort(crowd, kind='stable')[:_FAR_EXTRA]].astype(np.intp)
+
+
+def ink_spots(dot_image: DotImage, ok: np.ndarray, limit: int
+              ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """
+    Return the blobs of ``ok`` that are surely ink, darkest first, at most ``limit``.
+
+    With the local white and noise at each (:meth:`DotImage.white_at`,
+    :meth:`DotImage.noise_at`).
+    """
+    blobs = dot_image.blobs
     idx = np.flatnonzero(ok)
     # A centre dot is ink, the darkest thing on the card: clearly darker
     # than the noise round it (a speck of texture or of a dark noisy frame
@@ -147,38 +190,24 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     inky = ~sure & (dark >= _FAR_INK_DARKNESS)
     if np.count_nonzero(inky) <= _FAR_TRIES:
         sure |= inky
-    if not np.any(sure):
+    pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:limit]]
+    return idx[pick], white[pick], noise[pick]
+
+
+def zoom_spots(dot_image: DotImage, claimed: np.ndarray, tries: int) -> np.ndarray:
+    """
+    Return small ink blobs no card claimed, darkest first, at most ``tries``.
+
+    Where :class:`~.detector.Detector` found no card, these are looked at
+    again in a window zoomed and sharpened (:mod:`.zoom`): a far card seen
+    through a soft lens, whose dots faded and merged at the image's own
+    scale.
+    """
+    blobs = dot_image.blobs
+    if len(blobs) == 0 or tries < 1:
         return np.zeros(0, dtype=np.intp)
-    pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]
-    rho_out = config.ring_radii[0] / config.centre_dot_radius
-    ci = idx[pick]
-    # The reach of rank_candidates, half as big again: a centre this
-    # small, pale at its rim, comes out smaller than it is.
-    radius = np.sqrt(blobs.area[ci] / math.pi)
-    extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
-    reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
-    max_area = 2.0 * blobs.area[ci] + 8.0
-    ring_like, n_ring, own = dot_image.faint_rings(
-        u[pick], v[pick], reach, max_area, white[pick], noise[pick], radius, MIN_NEIGHBOURS)
-    # Softly focused (an analog camera, a lens focused nearer), a far card's
-    # dots merge once decimated into one ring-shaped spot: the darkest few
-    # small ones that show no ring there are looked at again at full
-    # resolution, where the dots are apart (four times the pixels a window:
-    # few, and small, to keep the cost of a frame with none).
-    again = np.flatnonzero(~ring_like & (blobs.area[ci] <= _FAR_FULL_MAX_AREA))[:_FAR_FULL_TRIES]
-    if len(again):
-        pa = pick[again]
-        ring_like[again], n_ring[again], own[again] = dot_image.faint_rings(
-            u[pa], v[pa], reach[again], max_area[again], white[pa], noise[pa], radius[again],
-            MIN_NEIGHBOURS, decimated=False)
-    # A centre dot is a dot, not the darkest part of a bigger dark thing,
-    # and its rings' spots are all round it: in half the eight directions
-    # or more, their mean near the centre. Darkest first; a crowd of faint
-    # spots (more than a card's two rings and marks, and some) says
-    # texture: last.
-    found = ring_like & ~(own > 6.0 * blobs.area[ci])
-    crowd = n_ring[found] > 3 * RING_POINTS
-    return ci[found][np.argsort(crowd, kind='stable')[:_FAR_EXTRA]].astype(np.intp)
+    ok = (blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA) & ~claimed
+    return ink_spots(dot_image, ok, tries)[0].astype(np.intp)
 
 
 def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,

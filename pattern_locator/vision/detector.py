@@ -33,7 +33,7 @@ import numpy as np
 from . import card_kernels
 from .camera import CameraModel
 from .cards import (apply_h, CardGuess, far_candidates, fit_homography, group,
-                    rank_candidates, rotation_about_z)
+                    rank_candidates, rotation_about_z, zoom_spots)
 from .centres import card_paper, measure_spots, Paper, plane_layout, SpotMeasures
 from .code_reading import (code_table, handedness, partial_hypotheses, read_code, Reading,
                            sole_hypothesis)
@@ -41,6 +41,7 @@ from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .drawn_card import drawn_cards
 from .stats import median
+from .zoom import zoom_window
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 
@@ -60,6 +61,8 @@ _REFIT_MIN = 7
 # under a lamp's highlight across it or with an object at its rim, anchors
 # no fit: three quarters of the ring must.
 _RING_REFIT_MIN = 12
+# A zoomed window's half side (image pixels), at most: a card at 5.5 m and beyond.
+_ZOOM_MAX_HALF = 48
 # 64 points round the unit circle: a found card's outer disc, for the box of
 # the blobs it may cover (Detector._covered).
 _UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2 * np.pi, 64, endpoint=False)),
@@ -167,7 +170,40 @@ class Detector:
     def detect(self, image: np.ndarray, camera: Optional[CameraModel] = None
                ) -> List[CardDetection]:
         """Every card in ``image`` (BGR uint8, or grey for geometry only)."""
-        dot_image = segment(check_image(image), self.params)
+        image = check_image(image)
+        cards, dot_image, claimed = self._detect(image, camera)
+        if any(card.ids is not None for card in cards) or dot_image.grey_only:
+            return cards
+        # No card read: a far card through a soft lens may be where the small
+        # ink blobs are. Each window zoomed and sharpened goes through every
+        # stage again (at most params.zoom_tries windows of bounded size).
+        rho_out = self._rho_out
+        blobs = dot_image.blobs
+        for j in zoom_spots(dot_image, claimed, self.params.zoom_tries):
+            if claimed[j]:
+                continue
+            radius = max(blobs.extent(int(j)), float(np.sqrt(blobs.area[j] / np.pi)))
+            half = int(min(_ZOOM_MAX_HALF, 2.2 * rho_out * radius + 8))
+            window = zoom_window(image, camera, float(blobs.u[j]), float(blobs.v[j]), half)
+            if window is None:
+                continue
+            for card in self._detect(window.image, window.camera)[0]:
+                card = _in_image(card, window.to_image())
+                # Only the card whose centre was zoomed on, read whole and
+                # without the map: the window's edge may hide part of any
+                # other (a near card's ring dot is as small as a far
+                # centre), and what an edge hides is not a hidden slot.
+                if card.ids is None or card.slots_from_map or card.candidates or \
+                        np.hypot(*(card.centre_px - (blobs.u[j], blobs.v[j]))) > radius:
+                    continue
+                claimed |= self._covered(card, blobs, camera)
+                cards.append(card)
+        return cards
+
+    def _detect(self, image: np.ndarray, camera: Optional[CameraModel]
+                ) -> Tuple[List[CardDetection], DotImage, np.ndarray]:
+        """Return the cards at the image's own scale, its segmentation and the blobs claimed."""
+        dot_image = segment(image, self.params)
         blobs = dot_image.blobs
         claimed = np.zeros(len(blobs), dtype=bool)
         cards = []
@@ -196,7 +232,7 @@ class Detector:
                 continue
             claimed |= self._covered(card, blobs, camera)
             cards.append(card)
-        return cards
+        return cards, dot_image, claimed
 
     def warm_up(self) -> int:
         """
@@ -485,6 +521,21 @@ class Detector:
                               min_darkness=min(self.params.min_window_darkness,
                                                0.5 * black_peak))
         return handedness(marks, black_peak) == 'ok'
+
+
+def _in_image(card: CardDetection, to_image: np.ndarray) -> CardDetection:
+    """Return a card found in a zoomed window (:mod:`.zoom`) in the image's pixels."""
+    scale = float(to_image[0, 0])
+
+    def moved(points: np.ndarray) -> np.ndarray:
+        return points * scale + to_image[:2, 2]
+
+    return dataclasses.replace(
+        card, points_px=moved(card.points_px), dot_areas_px=card.dot_areas_px * scale ** 2,
+        size_px=card.size_px * scale, homography=to_image @ card.homography,
+        fitted_centre_px=None if card.fitted_centre_px is None
+        else moved(card.fitted_centre_px),
+        candidates=tuple(_in_image(c, to_image) for c in card.candidates))
 
 
 def _second_reading(peaks: Optional[Reading], second: Optional[Reading]) -> Optional[Reading]:

@@ -45,6 +45,10 @@ class DetectorParams:
     # hypotheses are handed on for the localizer to choose among; more, and
     # the card is dropped.
     max_code_candidates: int = 8
+    # Where no card was found: this many small ink blobs, darkest first, are
+    # looked at again in a window zoomed twice and sharpened (a far card
+    # through a soft lens; vision.zoom). 0: never.
+    zoom_tries: int = 3
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -58,6 +62,8 @@ class DetectorParams:
         if self.max_code_candidates < 0:
             raise ConfigError(f'detector: max_code_candidates must be >= 0, got '
                               f'{self.max_code_candidates!r}')
+        if self.zoom_tries < 0:
+            raise ConfigError(f'detector: zoom_tries must be >= 0, got {self.zoom_tries!r}')
         if self.max_candidates < 1:
             raise ConfigError(f'detector: max_candidates must be >= 1, got '
                               f'{self.max_candidates!r}')

@@ -19,6 +19,10 @@ Four stages, one module each:
    building map's) when one fits, else the few that fit are handed on as
    ``candidates`` for a localizer to choose among.
 
+Where no card is read, a few small ink blobs are looked at again in windows
+zoomed twice and sharpened (:mod:`.zoom`), through the same four stages: a
+far card seen through a soft lens.
+
 Nothing here grows faster than the pixels plus a fixed number of candidates:
 bounded time and memory on any image.
 """
@@ -41,7 +45,7 @@ from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .drawn_card import drawn_cards
 from .stats import median
-from .zoom import zoom_window
+from .zoom import ZOOMED_PIXEL_SIGMA, zoom_window
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 
@@ -101,6 +105,11 @@ class CardDetection:
     # Where the fit puts the centre (image pixels) when its dot is not among
     # the points (there, but not measured well enough for the pose).
     fitted_centre_px: Optional[np.ndarray] = None
+    # A floor (image pixels) of the dots' noise that the pose counts, above
+    # what the fit's residuals say: a zoomed window's dots (vision.zoom) fit
+    # their pose closely but carry errors of a tenth of a pixel or two, the
+    # same for neighbours, that its residuals do not show.
+    min_pixel_sigma: float = 0.0
 
     @property
     def centre_px(self) -> np.ndarray:
@@ -531,7 +540,8 @@ def _in_image(card: CardDetection, to_image: np.ndarray) -> CardDetection:
         return points * scale + to_image[:2, 2]
 
     return dataclasses.replace(
-        card, points_px=moved(card.points_px), dot_areas_px=card.dot_areas_px * scale ** 2,
+        card, min_pixel_sigma=max(card.min_pixel_sigma, ZOOMED_PIXEL_SIGMA),
+        points_px=moved(card.points_px), dot_areas_px=card.dot_areas_px * scale ** 2,
         size_px=card.size_px * scale, homography=to_image @ card.homography,
         fitted_centre_px=None if card.fitted_centre_px is None
         else moved(card.fitted_centre_px),

@@ -97,10 +97,16 @@ class CardLocator:
         except EstimationError as exc:
             return _no_pose(card, self.estimator, str(exc))
 
+    def _pixel_sigma(self, card: CardDetection) -> Optional[float]:
+        """Return the dots' noise the pose counts at least: the locator's, or the card's floor."""
+        if card.min_pixel_sigma > 0.0:
+            return max(self.pixel_sigma or 0.0, card.min_pixel_sigma)
+        return self.pixel_sigma
+
     def _exact(self, card: CardDetection, camera: CameraModel,
                prior: Optional[PosePrior]) -> LocatedCard:
         est = estimate_exact(card.points_px, camera, self.config, prior=prior,
-                             pixel_sigma=self.pixel_sigma, fit_prior=self.fit_prior)
+                             pixel_sigma=self._pixel_sigma(card), fit_prior=self.fit_prior)
         psi, phi, theta, distance = paper_angles(est.T_camera_pattern, camera, self.config)
         if phi < self.min_tilt_deg:
             return _no_pose(card, 'exact', f'tilt {phi:.1f} deg below the minimum '
@@ -116,10 +122,11 @@ class CardLocator:
                prior: Optional[PosePrior]) -> LocatedCard:
         from .pose_paper import estimate_paper
         est = estimate_paper(card.points_px, camera, self.config, min_tilt_deg=self.min_tilt_deg)
+        sigma = self._pixel_sigma(card)
         covariance = covariance_of_pose(est.T_camera_pattern, card.points_px, camera,
-                                        self.config, self.pixel_sigma)
+                                        self.config, sigma)
         alternative, other_probability, barrier = flip_as_exact_sees(
-            est.T_camera_pattern, card.points_px, camera, self.config, prior, self.pixel_sigma)
+            est.T_camera_pattern, card.points_px, camera, self.config, prior, sigma)
         return LocatedCard(card, est.T_camera_pattern, covariance, est.reprojection_rms_px, None,
                            est.psi_deg, est.phi_deg, est.theta_deg, est.distance_m, 'paper',
                            alternative=alternative, other_probability=other_probability,

@@ -45,7 +45,7 @@ from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .drawn_card import drawn_cards
 from .stats import median
-from .zoom import ZOOMED_PIXEL_SIGMA, zoom_window
+from .zoom import zoom_window, ZOOMED_PIXEL_SIGMA
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 

@@ -322,8 +322,9 @@ def _condition_makers() -> Dict[str, Callable]:
 
 
 CONDITIONS = tuple(_condition_makers())
-# The conditions whose target is AprilTag's rate with decimate 1.
-_FAR = ('far', 'far soft')
+# The conditions whose target is AprilTag's rate with decimate 1, and how
+# the targets table names each.
+_FAR = {'far': '5.5-8 m', 'far soft': '5.5-8 m, soft lens'}
 
 
 def make_frames(config: PatternConfig, per_camera: int, seed: int,
@@ -761,7 +762,7 @@ def targets_table(rows: Dict[str, Row], follow: Optional['FollowCounts'] = None)
             low, high = wilson_interval(follow.fixes_of_card, follow.views)
             add('   the same, following the card (localizer, last fix)',
                 f'{rate:.1f} % ({low:.0f}-{high:.0f})', rate >= limit and follow.wrong == 0)
-    for name, text in (('far', '5.5-8 m'), ('far soft', '5.5-8 m, soft lens')):
+    for name, text in _FAR.items():
         far = rows.get(name)
         if far is None or not far.april_d1:
             continue

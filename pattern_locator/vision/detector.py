@@ -186,13 +186,12 @@ class Detector:
         # No card read: a far card through a soft lens may be where the small
         # ink blobs are. Each window zoomed and sharpened goes through every
         # stage again (at most params.zoom_tries windows of bounded size).
-        rho_out = self._rho_out
         blobs = dot_image.blobs
         for j in zoom_spots(dot_image, claimed, self.params.zoom_tries):
             if claimed[j]:
                 continue
             radius = max(blobs.extent(int(j)), float(np.sqrt(blobs.area[j] / np.pi)))
-            half = int(min(_ZOOM_MAX_HALF, 2.2 * rho_out * radius + 8))
+            half = int(min(_ZOOM_MAX_HALF, 2.2 * self._rho_out * radius + 8))
             window = zoom_window(image, camera, float(blobs.u[j]), float(blobs.v[j]), half)
             if window is None:
                 continue

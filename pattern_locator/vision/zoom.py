@@ -45,11 +45,16 @@ class ZoomedWindow:
 
     def to_image(self) -> np.ndarray:
         """Return the 3x3 map from the window's pixels to the image's."""
-        # cv2.resize puts window pixel x' over image pixel (x' + 0.5) / ZOOM - 0.5.
-        offset = (ZOOM - 1) / 2.0
-        return np.array([[1.0 / ZOOM, 0.0, self.x0 - offset / ZOOM],
-                         [0.0, 1.0 / ZOOM, self.y0 - offset / ZOOM],
-                         [0.0, 0.0, 1.0]])
+        return _window_to_image(self.x0, self.y0)
+
+
+def _window_to_image(x0: int, y0: int) -> np.ndarray:
+    """Return the 3x3 map from the pixels of a window zoomed from (x0, y0) to the image's."""
+    # cv2.resize puts window pixel x' over image pixel (x' + 0.5) / ZOOM - 0.5.
+    offset = (ZOOM - 1) / 2.0
+    return np.array([[1.0 / ZOOM, 0.0, x0 - offset / ZOOM],
+                     [0.0, 1.0 / ZOOM, y0 - offset / ZOOM],
+                     [0.0, 0.0, 1.0]])
 
 
 def zoom_window(image: np.ndarray, camera: Optional[CameraModel], u: float, v: float,
@@ -67,7 +72,7 @@ def zoom_window(image: np.ndarray, camera: Optional[CameraModel], u: float, v: f
     window_camera = None
     if camera is not None:
         # The same lens (distortion acts on normalised points): K scaled and moved.
-        to_window = np.linalg.inv(ZoomedWindow(big, None, x0, y0).to_image())
+        to_window = np.linalg.inv(_window_to_image(x0, y0))
         window_camera = CameraModel(big.shape[1], big.shape[0], to_window @ camera.K,
                                     camera.D, camera.distortion_model, camera.name)
     return ZoomedWindow(big, window_camera, x0, y0)

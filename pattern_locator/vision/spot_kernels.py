@@ -1572,6 +1572,48 @@ def box3(a):
 
 
 @numba.njit(cache=True, nogil=False)
+def paper_pixels(size, pred, to_plane, q0, points, radii, half, in_image):
+    """
+    Tell which pixels of one (size, size) window should be paper (:func:`.centres._paper`).
+
+    ``pred`` (2): the window point of the spot's centre ``q0`` (metres);
+    ``to_plane`` (2, 2): metres per window pixel; ``points`` (P, 2) and
+    ``radii`` (P) the card's spots; ``half`` the card's half side;
+    ``in_image`` (size, size) bool. A pixel is paper when it is on the card
+    and more than three window pixels (in the plane) from every spot's edge.
+    Float64, in the order of the numpy code it replaced; a NaN anywhere
+    makes no paper.
+    """
+    out = np.zeros((size, size), dtype=np.bool_)
+    a00, a01 = np.float64(to_plane[0, 0]), np.float64(to_plane[0, 1])
+    a10, a11 = np.float64(to_plane[1, 0]), np.float64(to_plane[1, 1])
+    room = 3.0 * np.sqrt(abs(a00 * a11 - a01 * a10))
+    n = points.shape[0]
+    # Clear of a spot: its distance above radius + room, compared squared.
+    reach = np.empty(n)
+    for i in range(n):
+        reach[i] = (radii[i] + room) * (radii[i] + room)
+    for y in range(size):
+        dy = np.float64(y) - pred[1]
+        for x in range(size):
+            if not in_image[y, x]:
+                continue
+            dx = np.float64(x) - pred[0]
+            qx = q0[0] + a00 * dx + a01 * dy
+            qy = q0[1] + a10 * dx + a11 * dy
+            if not (half - abs(qx) > room and half - abs(qy) > room):
+                continue
+            clear = True
+            for i in range(n):
+                ex, ey = qx - points[i, 0], qy - points[i, 1]
+                if not (ex * ex + ey * ey > reach[i]):
+                    clear = False
+                    break
+            out[y, x] = clear
+    return out
+
+
+@numba.njit(cache=True, nogil=False)
 def paper_noise(source, pts, roomy):
     """
     Measure the white and noise in 3x3 patches at paper points: (white, spread, roomy spread).

@@ -68,6 +68,36 @@ def test_box3_is_opencvs_blur_of_the_window_alone():
     assert np.array_equal(spot_kernels.box3(a), want)
 
 
+@pytest.mark.parametrize('seed', range(5))
+def test_paper_pixels_are_those_clear_of_every_spot_and_inside_the_card(seed):
+    # The per-pixel reference: each pixel's plane point against every spot's
+    # edge and the card's edge, three window pixels of room (in the plane).
+    rng = np.random.default_rng(seed)
+    size, half = 31, 0.15
+    points = rng.uniform(-0.12, 0.12, (21, 2))
+    radii = rng.uniform(0.008, 0.025, 21)
+    pred = rng.uniform(10, 20, 2)
+    to_plane = rng.normal(0.0, 0.003, (2, 2))
+    q0 = points[int(rng.integers(21))]
+    in_image = rng.uniform(size=(size, size)) > 0.1
+    k = np.arange(size, dtype=np.float64)
+    qx = q0[0] + to_plane[0, 0] * (k[None, :] - pred[0]) + to_plane[0, 1] * (k[:, None] - pred[1])
+    qy = q0[1] + to_plane[1, 0] * (k[None, :] - pred[0]) + to_plane[1, 1] * (k[:, None] - pred[1])
+    room = 3.0 * np.sqrt(abs(np.linalg.det(to_plane)))
+    ink = np.min(np.hypot(qx[..., None] - points[:, 0], qy[..., None] - points[:, 1]) - radii,
+                 axis=-1)
+    edge = half - np.maximum(np.abs(qx), np.abs(qy))
+    want = (ink > room) & (edge > room) & in_image
+    got = spot_kernels.paper_pixels(size, pred, to_plane, q0, points, radii, half, in_image)
+    assert want.any() and (~want).any()
+    assert np.array_equal(got, want)
+    # Nothing is paper where the plane is not known.
+    bad = to_plane.copy()
+    bad[0, 0] = np.nan
+    assert not spot_kernels.paper_pixels(size, pred, bad, q0, points, radii, half,
+                                         in_image).any()
+
+
 def test_spot_shapes_are_the_singular_value_decomposition():
     rng = np.random.default_rng(7)
     L = rng.normal(0, 100, (50, 2, 2))

@@ -30,7 +30,7 @@ bounded time and memory on any image.
 import dataclasses
 from dataclasses import dataclass, field
 import functools
-from typing import Dict, Iterable, Iterator, List, Optional, Tuple
+from typing import Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
@@ -180,14 +180,26 @@ class Detector:
                ) -> List[CardDetection]:
         """Every card in ``image`` (BGR uint8, or grey for geometry only)."""
         image = check_image(image)
-        cards, dot_image, claimed = self._detect(image, camera)
+        scan = self._detect(image, camera)
+        cards, dot_image, claimed = scan.cards, scan.dot_image, scan.claimed
         if any(card.ids is not None for card in cards) or dot_image.grey_only:
             return cards
         # No card read: a far card through a soft lens may be where the small
         # ink blobs are. Each window zoomed and sharpened goes through every
         # stage again (at most params.zoom_tries windows of bounded size).
+        # First the far candidates not read: a ring showed round them at the
+        # image's scale (cards.far_candidates), too soft to read there. Then
+        # the darkest small ink blobs. None in a card read whole and seen in a
+        # mirror: its dots were sharp enough, and a zoom sees the same mirror
+        # (three windows on a glass door's card cost 10-20 ms at 1280x720).
         blobs = dot_image.blobs
-        for j in zoom_spots(dot_image, claimed, self.params.zoom_tries):
+        settled = claimed.copy()
+        for H in scan.mirrored:
+            settled |= self._covered(H, blobs, camera)
+        tries = self.params.zoom_tries
+        order = [int(j) for j in scan.far if not settled[j]]
+        order += [int(j) for j in zoom_spots(dot_image, settled, tries) if int(j) not in order]
+        for j in order[:tries]:
             if claimed[j]:
                 continue
             radius = max(blobs.extent(int(j)), float(np.sqrt(blobs.area[j] / np.pi)))
@@ -195,7 +207,7 @@ class Detector:
             window = zoom_window(image, camera, float(blobs.u[j]), float(blobs.v[j]), half)
             if window is None:
                 continue
-            for card in self._detect(window.image, window.camera)[0]:
+            for card in self._detect(window.image, window.camera).cards:
                 card = _in_image(card, window.to_image())
                 # Only the card whose centre was zoomed on, read whole and
                 # without the map: the window's edge may hide part of any
@@ -204,31 +216,34 @@ class Detector:
                 if card.ids is None or card.slots_from_map or card.candidates or \
                         np.hypot(*(card.centre_px - (blobs.u[j], blobs.v[j]))) > radius:
                     continue
-                claimed |= self._covered(card, blobs, camera)
+                claimed |= self._covered(card.homography, blobs, camera)
                 cards.append(card)
         return cards
 
-    def _detect(self, image: np.ndarray, camera: Optional[CameraModel]
-                ) -> Tuple[List[CardDetection], DotImage, np.ndarray]:
-        """Return the cards at the image's own scale, its segmentation and the blobs claimed."""
+    def _detect(self, image: np.ndarray, camera: Optional[CameraModel]) -> '_Scan':
+        """Find the cards at the image's own scale (:class:`_Scan`)."""
         dot_image = segment(image, self.params)
         blobs = dot_image.blobs
         claimed = np.zeros(len(blobs), dtype=bool)
-        cards = []
+        cards: List[CardDetection] = []
+        mirrored: List[np.ndarray] = []
         ranked = rank_candidates(blobs, self.config, self.params,
                                  dot_image.noise_at(blobs.u, blobs.v))
+
+        far: List[np.ndarray] = []
 
         def candidates() -> Iterator[int]:
             yield from ranked
             # Then far cards whose ring dots decimation lost (bounded; see cards.py).
-            yield from far_candidates(dot_image, self.config, ranked, claimed)
+            far.append(far_candidates(dot_image, self.config, ranked, claimed))
+            yield from far[0]
 
         for ci in candidates():
             if claimed[ci]:
                 continue
             card = hidden = None
             for guess in self._guesses(dot_image, int(ci), camera):
-                card = self._measure_and_read(dot_image, guess, camera)
+                card = self._measure_and_read(dot_image, guess, camera, mirrored)
                 if card is not None and card.candidates:
                     # Several codes fit: a finer grouping may yet read the slot.
                     hidden, card = hidden or card, None
@@ -238,9 +253,10 @@ class Detector:
             card = card or hidden
             if card is None:
                 continue
-            claimed |= self._covered(card, blobs, camera)
+            claimed |= self._covered(card.homography, blobs, camera)
             cards.append(card)
-        return cards, dot_image, claimed
+        return _Scan(cards, dot_image, claimed, mirrored,
+                     far[0] if far else np.zeros(0, dtype=np.intp))
 
     def warm_up(self) -> int:
         """
@@ -318,44 +334,50 @@ class Detector:
             & (ratio > 0.12) & (ratio < 0.9)
         return int(np.count_nonzero(near)) >= 10
 
-    def _covered(self, card: CardDetection, blobs, camera: Optional[CameraModel]
-                 ) -> np.ndarray:
-        """Blobs inside a found card's outer ring (not candidates any more)."""
+    def _covered(self, H: np.ndarray, blobs, camera: Optional[CameraModel]) -> np.ndarray:
+        """Blobs inside the outer ring of the card of homography ``H`` (no candidates)."""
         reach = self.config.ring_radii[0] + 2 * self.config.ring_dot_radius
         if len(blobs) <= _FEW_BLOBS:
-            return self._in_disc(card, blobs.u, blobs.v, reach, camera)
+            return self._in_disc(H, blobs.u, blobs.v, reach, camera)
         # Only blobs in the image's box round that disc can be in it: a
         # cluttered frame has thousands of blobs, and undistorting them all
         # cost milliseconds. The box is the disc's edge, seen through the
         # homography and the lens at 64 points, grown by a twentieth (the
         # edge between two points bulges out by a thousandth of its size).
-        edge = apply_h(card.homography, reach * _UNIT_CIRCLE)
+        edge = apply_h(H, reach * _UNIT_CIRCLE)
         if camera is not None:
             edge = camera.distort_pixels(edge)
         if not np.isfinite(edge).all():
-            return self._in_disc(card, blobs.u, blobs.v, reach, camera)
+            return self._in_disc(H, blobs.u, blobs.v, reach, camera)
         lo, hi = edge.min(axis=0), edge.max(axis=0)
         pad = 0.05 * float(np.max(hi - lo)) + 2.0
         index = np.flatnonzero((blobs.u >= lo[0] - pad) & (blobs.u <= hi[0] + pad)
                                & (blobs.v >= lo[1] - pad) & (blobs.v <= hi[1] + pad))
         covered = np.zeros(len(blobs), dtype=bool)
-        covered[index] = self._in_disc(card, blobs.u[index], blobs.v[index], reach, camera)
+        covered[index] = self._in_disc(H, blobs.u[index], blobs.v[index], reach, camera)
         return covered
 
     @staticmethod
-    def _in_disc(card: CardDetection, u: np.ndarray, v: np.ndarray, reach: float,
+    def _in_disc(H: np.ndarray, u: np.ndarray, v: np.ndarray, reach: float,
                  camera: Optional[CameraModel]) -> np.ndarray:
-        """Whether image points (u, v) lie within ``reach`` of the card's centre on its plane."""
+        """Whether image points (u, v) lie within ``reach`` of the centre of plane ``H``."""
         pts = np.column_stack([u, v])
         if camera is not None and len(pts):
             pts = camera.undistort_pixels(pts)
-        return card_kernels.in_disc(np.ascontiguousarray(card.homography, dtype=np.float64),
+        return card_kernels.in_disc(np.ascontiguousarray(H, dtype=np.float64),
                                     np.ascontiguousarray(pts, dtype=np.float64), float(reach))
 
     # Centres and code --------------------------------------------------------
 
     def _measure_and_read(self, dot_image: DotImage, guess: CardGuess,
-                          camera: Optional[CameraModel]) -> Optional[CardDetection]:
+                          camera: Optional[CameraModel], mirrored: List[np.ndarray]
+                          ) -> Optional[CardDetection]:
+        """
+        Measure, read and check the card of ``guess``; None if it is no card with a code.
+
+        A card read whole whose marks show a mirror image is refused, and
+        its homography appended to ``mirrored``.
+        """
         cfg, params = self.config, self.params
         n_rings = cfg.n_rings
         H = guess.homography
@@ -386,7 +408,7 @@ class Detector:
         if reading is None:
             return None
         valid[list(reading.not_dots)] = False
-        handed: Dict[int, bool] = {}
+        handed: Dict[int, str] = {}
 
         def mirror_safe(point1: int) -> bool:
             """Tell whether the marks, read with point 1 in ``point1``, show no mirror."""
@@ -396,10 +418,12 @@ class Detector:
                 H_turned = H @ self._turns[point1]
                 handed[point1] = self._handed(dot_image, camera, H_turned, paper, spots, valid,
                                               point1)
-            return handed[point1]
+            return handed[point1] == 'ok'
 
         if reading.code is not None:
             if not mirror_safe(reading.point1_slot):
+                if handed[reading.point1_slot] == 'mirror':
+                    mirrored.append(H)
                 return None
             return self._card(dot_image, camera, H, paper, spots, valid, reading.point1_slot,
                               reading.code, reading.margin, reading.ring_codes)
@@ -506,8 +530,8 @@ class Detector:
         return H, valid
 
     def _handed(self, dot_image: DotImage, camera: Optional[CameraModel], H_final: np.ndarray,
-                paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int) -> bool:
-        """Tell whether the handedness marks show the card itself (not its mirror image)."""
+                paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int) -> str:
+        """Return what the handedness marks show: ``'ok'``, ``'mirror'`` or ``'unsure'``."""
         cfg = self.config
         rows = 1 + point1 + RING_POINTS * np.arange(cfg.n_rings)
         black = spots.peak[rows][valid[rows]]
@@ -517,7 +541,7 @@ class Detector:
             ring = valid[1:]
             black = spots.peak[1:][ring]
             if len(black) < 5:
-                return False
+                return 'unsure'
         black_peak = float(median(black))
         # A mark counts when at least half as dark as point 1 (handedness):
         # that, not the dots' fixed bar, is the bar for its window too. A far
@@ -528,7 +552,17 @@ class Detector:
                               colour=False, core_margin=1.0, refine=False,
                               min_darkness=min(self.params.min_window_darkness,
                                                0.5 * black_peak))
-        return handedness(marks, black_peak) == 'ok'
+        return handedness(marks, black_peak)
+
+
+class _Scan(NamedTuple):
+    """What :meth:`Detector._detect` found at an image's own scale."""
+
+    cards: List[CardDetection]
+    dot_image: DotImage
+    claimed: np.ndarray             # blobs inside a card found
+    mirrored: List[np.ndarray]      # homographies of cards read whole but seen in a mirror
+    far: np.ndarray                 # the far candidates looked at (cards.far_candidates)
 
 
 def _in_image(card: CardDetection, to_image: np.ndarray) -> CardDetection:

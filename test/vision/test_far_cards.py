@@ -228,6 +228,73 @@ def test_soft_far_card_no_stage_finds_is_read_in_a_zoomed_sharpened_window(index
     assert card.min_pixel_sigma == ZOOMED_PIXEL_SIGMA
 
 
+@pytest.mark.parametrize('index, camera_name', [(15, 'vga'), (38, 'hd')])
+def test_soft_far_candidate_the_image_scale_cannot_read_is_zoomed_on_first(index, camera_name):
+    # 6.6-7.4 m through a soft lens: a ring of faint spots shows round the
+    # centre at the image's scale (a far candidate), but its dots do not
+    # read there, and darker small blobs of the background come before it.
+    # The far candidates not read are zoomed on first.
+    from pattern_locator.evaluation import stress
+    from pattern_locator.evaluation.bench import bench_cameras
+
+    frame = stress.make_frames(CFG, 20, 22, ['far soft'])[index]
+    camera = bench_cameras()[frame.camera_name]
+    assert camera.width == {'vga': 640, 'hd': 1280}[camera_name]
+    image = stress.render_frame(frame, camera, CFG, 'dots')
+    T = stress._card_pose(frame, camera)
+    centre = camera.project(T.t[None, :])[0]
+    scan = NO_ZOOM._detect(image, camera)
+    assert scan.cards == []
+    blobs = scan.dot_image.blobs
+    j = int(np.argmin(np.hypot(blobs.u - centre[0], blobs.v - centre[1])))
+    assert np.hypot(blobs.u[j] - centre[0], blobs.v[j] - centre[1]) < 1.5
+    assert j in scan.far
+    assert j not in card_stage.zoom_spots(scan.dot_image, scan.claimed, 3)
+    (card,) = DETECTOR.detect(image, camera)
+    assert card.ids.as_tuple() == frame.ids.as_tuple()
+
+
+@pytest.mark.parametrize('index', [393, 398])
+def test_a_card_read_whole_in_a_mirror_is_not_zoomed_on(monkeypatch, index):
+    # A near card in a glass door, read whole and refused by its marks: its
+    # dots were sharp enough, and windows zoomed round its small ink blobs
+    # (three cost 10-20 ms at 1280x720) would see the same mirror. Windows
+    # may still go to small blobs elsewhere.
+    from pattern_locator.evaluation import stress
+    from pattern_locator.evaluation.bench import bench_cameras
+
+    frame = stress.make_frames(CFG, 10, 1)[index]
+    assert frame.condition == 'mirror'
+    camera = bench_cameras()[frame.camera_name]
+    image = stress.render_frame(frame, camera, CFG, 'dots')
+    T = stress._card_pose(frame, camera)
+    H = camera.K @ np.column_stack([T.R[:, 0], T.R[:, 1], T.t])
+    reach = CFG.ring_radii[0] + 2 * CFG.ring_dot_radius
+
+    def on_card(u, v):
+        ideal = camera.undistort_pixels(np.column_stack([u, v]))
+        plane = np.linalg.solve(H, np.vstack([ideal.T, np.ones(len(ideal))]))
+        return np.hypot(*(plane[:2] / plane[2])) <= reach
+
+    scan = DETECTOR._detect(image, camera)
+    assert scan.cards == [] and len(scan.mirrored) == 1
+    # Without the rule the darkest small ink blobs are the mirrored card's.
+    blobs = scan.dot_image.blobs
+    darkest = card_stage.zoom_spots(scan.dot_image, scan.claimed, 3)
+    assert on_card(blobs.u[darkest], blobs.v[darkest]).any()
+    zoomed = []
+    zoom_window = detector_module.zoom_window
+
+    def spy(image, camera, u, v, half):
+        zoomed.append((u, v))
+        return zoom_window(image, camera, u, v, half)
+
+    monkeypatch.setattr(detector_module, 'zoom_window', spy)
+    assert ids_found(image, camera) == []
+    zoomed = np.array(zoomed).reshape(-1, 2)
+    assert not on_card(zoomed[:, 0], zoomed[:, 1]).any()
+
+
 def test_a_zoomed_card_nearly_face_on_is_unsure_of_its_planar_side():
     # 7.7 m at 35 degrees, read in a zoomed window: its dots (within 0.3 px
     # of the truth) fit the flipped pose better, 8.8 m from the truth. With

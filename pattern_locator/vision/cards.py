@@ -52,6 +52,10 @@ _FAR_INK_DARKNESS = 0.4
 # to this area are the ones zoomed where no card was found (zoom_spots).
 _FAR_FULL_TRIES = 2
 _FAR_FULL_MAX_AREA = 32.0
+# Of the small ink blobs looked at for a zoom (the darkest _FAR_TRIES), those
+# with at least this many faint spots round them (and no bigger dark thing
+# under them) go first: a soft far card's ring shows as a few faint spots.
+_ZOOM_MIN_RING = 3
 
 
 @dataclass(frozen=True)
@@ -135,16 +139,7 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     ci, white, noise = ink_spots(dot_image, ok, _FAR_TRIES)
     if len(ci) == 0:
         return np.zeros(0, dtype=np.intp)
-    u, v = blobs.u[ci], blobs.v[ci]
-    rho_out = config.ring_radii[0] / config.centre_dot_radius
-    # The reach of rank_candidates, half as big again: a centre this
-    # small, pale at its rim, comes out smaller than it is.
-    radius = np.sqrt(blobs.area[ci] / math.pi)
-    extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
-    reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
-    max_area = 2.0 * blobs.area[ci] + 8.0
-    ring_like, n_ring, own = dot_image.faint_rings(
-        u, v, reach, max_area, white, noise, radius, MIN_NEIGHBOURS)
+    ring_like, n_ring, own = _faint_rings_round(dot_image, config, ci, white, noise)
     # Softly focused (an analog camera, a lens focused nearer), a far card's
     # dots merge once decimated into one ring-shaped spot: the darkest few
     # small ones that show no ring there are looked at again at full
@@ -152,9 +147,8 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     # few, and small, to keep the cost of a frame with none).
     again = np.flatnonzero(~ring_like & (blobs.area[ci] <= _FAR_FULL_MAX_AREA))[:_FAR_FULL_TRIES]
     if len(again):
-        ring_like[again], n_ring[again], own[again] = dot_image.faint_rings(
-            u[again], v[again], reach[again], max_area[again], white[again], noise[again],
-            radius[again], MIN_NEIGHBOURS, decimated=False)
+        ring_like[again], n_ring[again], own[again] = _faint_rings_round(
+            dot_image, config, ci[again], white[again], noise[again], decimated=False)
     # A centre dot is a dot, not the darkest part of a bigger dark thing,
     # and its rings' spots are all round it: in half the eight directions
     # or more, their mean near the centre. Darkest first; a crowd of faint
@@ -163,6 +157,22 @@ def far_candidates(dot_image: DotImage, config: PatternConfig, taken: np.ndarray
     found = ring_like & ~(own > 6.0 * blobs.area[ci])
     crowd = n_ring[found] > 3 * RING_POINTS
     return ci[found][np.argsort(crowd, kind='stable')[:_FAR_EXTRA]].astype(np.intp)
+
+
+def _faint_rings_round(dot_image: DotImage, config: PatternConfig, ci: np.ndarray,
+                       white: np.ndarray, noise: np.ndarray, decimated: bool = True
+                       ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return :meth:`DotImage.faint_rings` round small blobs ``ci`` as a far card's centres."""
+    blobs = dot_image.blobs
+    rho_out = config.ring_radii[0] / config.centre_dot_radius
+    # The reach of rank_candidates, half as big again: a centre this
+    # small, pale at its rim, comes out smaller than it is.
+    radius = np.sqrt(blobs.area[ci] / math.pi)
+    extent = 0.5 * blobs.scale * np.max(blobs.box[ci, 2:4], axis=1).astype(np.float64)
+    reach = 2.25 * rho_out * np.maximum(extent, radius) + 3.0
+    max_area = 2.0 * blobs.area[ci] + 8.0
+    return dot_image.faint_rings(blobs.u[ci], blobs.v[ci], reach, max_area, white, noise,
+                                 radius, MIN_NEIGHBOURS, decimated=decimated)
 
 
 def ink_spots(dot_image: DotImage, ok: np.ndarray, limit: int
@@ -194,20 +204,29 @@ def ink_spots(dot_image: DotImage, ok: np.ndarray, limit: int
     return idx[pick], white[pick], noise[pick]
 
 
-def zoom_spots(dot_image: DotImage, claimed: np.ndarray, tries: int) -> np.ndarray:
+def zoom_spots(dot_image: DotImage, config: PatternConfig, claimed: np.ndarray, tries: int
+               ) -> np.ndarray:
     """
-    Return small ink blobs no card claimed, darkest first, at most ``tries``.
+    Return small ink blobs no card claimed, those a few faint spots ring first, at most ``tries``.
 
     Where :class:`~.detector.Detector` found no card, these are looked at
     again in a window zoomed and sharpened (:mod:`.zoom`): a far card seen
     through a soft lens, whose dots faded and merged at the image's own
-    scale.
+    scale. Of the darkest ``_FAR_TRIES``, those with ``_ZOOM_MIN_RING`` faint
+    spots round them or more (a ring too faint or broken for a far
+    candidate), most first; then the others, darkest first.
     """
     blobs = dot_image.blobs
     if len(blobs) == 0 or tries < 1:
         return np.zeros(0, dtype=np.intp)
     ok = (blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA) & ~claimed
-    return ink_spots(dot_image, ok, tries)[0].astype(np.intp)
+    ci, white, noise = ink_spots(dot_image, ok, _FAR_TRIES)
+    if len(ci) == 0:
+        return np.zeros(0, dtype=np.intp)
+    _, n_ring, own = _faint_rings_round(dot_image, config, ci, white, noise)
+    ringed = (n_ring >= _ZOOM_MIN_RING) & (own <= 6.0 * blobs.area[ci])
+    order = np.argsort(np.where(ringed, -n_ring, 0), kind='stable')
+    return ci[order[:tries]].astype(np.intp)
 
 
 def group(blobs: Blobs, ci: int, config: PatternConfig, params: DetectorParams,

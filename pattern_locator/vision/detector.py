@@ -198,7 +198,8 @@ class Detector:
             settled |= self._covered(H, blobs, camera)
         tries = self.params.zoom_tries
         order = [int(j) for j in scan.far if not settled[j]]
-        order += [int(j) for j in zoom_spots(dot_image, settled, tries) if int(j) not in order]
+        order += [int(j) for j in zoom_spots(dot_image, self.config, settled, tries)
+                  if int(j) not in order]
         for j in order[:tries]:
             if claimed[j]:
                 continue

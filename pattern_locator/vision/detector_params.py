@@ -45,9 +45,10 @@ class DetectorParams:
     # hypotheses are handed on for the localizer to choose among; more, and
     # the card is dropped.
     max_code_candidates: int = 8
-    # Where no card was found: this many small ink blobs, darkest first, are
-    # looked at again in a window zoomed twice and sharpened (a far card
-    # through a soft lens; vision.zoom). 0: never.
+    # Where no card was read: this many blobs (far candidates not read, then
+    # small ink blobs that faint spots ring, then the darkest) are looked at
+    # again in a window zoomed twice and sharpened (a far card through a
+    # soft lens; vision.zoom). 0: never.
     zoom_tries: int = 3
 
     def __post_init__(self) -> None:

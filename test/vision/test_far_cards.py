@@ -228,18 +228,18 @@ def test_soft_far_card_no_stage_finds_is_read_in_a_zoomed_sharpened_window(index
     assert card.min_pixel_sigma == ZOOMED_PIXEL_SIGMA
 
 
-@pytest.mark.parametrize('index, camera_name', [(15, 'vga'), (38, 'hd')])
-def test_soft_far_candidate_the_image_scale_cannot_read_is_zoomed_on_first(index, camera_name):
-    # 6.6-7.4 m through a soft lens: a ring of faint spots shows round the
-    # centre at the image's scale (a far candidate), but its dots do not
-    # read there, and darker small blobs of the background come before it.
-    # The far candidates not read are zoomed on first.
+@pytest.mark.parametrize('seed, index', [(22, 15), (22, 38), (20, 17), (23, 11), (23, 19),
+                                         (25, 23)])
+def test_soft_far_card_behind_darker_blobs_is_zoomed_on(seed, index):
+    # 6.6-7.9 m through a soft lens, on a background with darker small blobs
+    # than the card's centre: the darkest three small ink blobs miss it.
+    # Zoomed first: the far candidates not read (a ring showed round them at
+    # the image's scale; seed 22), then the blobs a few faint spots ring.
     from pattern_locator.evaluation import stress
     from pattern_locator.evaluation.bench import bench_cameras
 
-    frame = stress.make_frames(CFG, 20, 22, ['far soft'])[index]
+    frame = stress.make_frames(CFG, 20, seed, ['far soft'])[index]
     camera = bench_cameras()[frame.camera_name]
-    assert camera.width == {'vga': 640, 'hd': 1280}[camera_name]
     image = stress.render_frame(frame, camera, CFG, 'dots')
     T = stress._card_pose(frame, camera)
     centre = camera.project(T.t[None, :])[0]
@@ -248,8 +248,8 @@ def test_soft_far_candidate_the_image_scale_cannot_read_is_zoomed_on_first(index
     blobs = scan.dot_image.blobs
     j = int(np.argmin(np.hypot(blobs.u - centre[0], blobs.v - centre[1])))
     assert np.hypot(blobs.u[j] - centre[0], blobs.v[j] - centre[1]) < 1.5
-    assert j in scan.far
-    assert j not in card_stage.zoom_spots(scan.dot_image, scan.claimed, 3)
+    small = (blobs.area >= 8) & (blobs.area <= 32) & ~scan.claimed
+    assert j not in card_stage.ink_spots(scan.dot_image, small, 3)[0]
     (card,) = DETECTOR.detect(image, camera)
     assert card.ids.as_tuple() == frame.ids.as_tuple()
 
@@ -280,7 +280,7 @@ def test_a_card_read_whole_in_a_mirror_is_not_zoomed_on(monkeypatch, index):
     assert scan.cards == [] and len(scan.mirrored) == 1
     # Without the rule the darkest small ink blobs are the mirrored card's.
     blobs = scan.dot_image.blobs
-    darkest = card_stage.zoom_spots(scan.dot_image, scan.claimed, 3)
+    darkest = card_stage.zoom_spots(scan.dot_image, CFG, scan.claimed, 3)
     assert on_card(blobs.u[darkest], blobs.v[darkest]).any()
     zoomed = []
     zoom_window = detector_module.zoom_window

@@ -183,8 +183,16 @@ def ink_spots(dot_image: DotImage, ok: np.ndarray, limit: int
     With the local white and noise at each (:meth:`DotImage.white_at`,
     :meth:`DotImage.noise_at`).
     """
-    blobs = dot_image.blobs
     idx = np.flatnonzero(ok)
+    white, noise, dark, sure = _ink_measures(dot_image, idx)
+    pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:limit]]
+    return idx[pick], white[pick], noise[pick]
+
+
+def _ink_measures(dot_image: DotImage, idx: np.ndarray
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return blobs ``idx``'s local white, noise, peak darkness and whether each is surely ink."""
+    blobs = dot_image.blobs
     # A centre dot is ink, the darkest thing on the card: clearly darker
     # than the noise round it (a speck of texture or of a dark noisy frame
     # is not), darkest first. The noise is measured where it is lowest
@@ -200,32 +208,41 @@ def ink_spots(dot_image: DotImage, ok: np.ndarray, limit: int
     inky = ~sure & (dark >= _FAR_INK_DARKNESS)
     if np.count_nonzero(inky) <= _FAR_TRIES:
         sure |= inky
-    pick = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:limit]]
-    return idx[pick], white[pick], noise[pick]
+    return white, noise, dark, sure
 
 
 def zoom_spots(dot_image: DotImage, config: PatternConfig, claimed: np.ndarray, tries: int
                ) -> np.ndarray:
     """
-    Return small ink blobs no card claimed, those a few faint spots ring first, at most ``tries``.
+    Return small blobs no card claimed, those a few faint spots ring first, at most ``tries``.
 
     Where :class:`~.detector.Detector` found no card, these are looked at
     again in a window zoomed and sharpened (:mod:`.zoom`): a far card seen
     through a soft lens, whose dots faded and merged at the image's own
-    scale. Of the darkest ``_FAR_TRIES``, those with ``_ZOOM_MIN_RING`` faint
-    spots round them or more (a ring too faint or broken for a far
-    candidate), most first; then the others, darkest first.
+    scale. Looked at: the darkest ``_FAR_TRIES`` surely ink
+    (:func:`ink_spots`), and those of the darkest ``_FAR_TRIES`` that are not
+    (a soft far centre is paler than ink). First those with
+    ``_ZOOM_MIN_RING`` faint spots round them or more, but not a crowd (a
+    ring too faint or broken for a far candidate), most first; then the
+    others surely ink, darkest first.
     """
     blobs = dot_image.blobs
     if len(blobs) == 0 or tries < 1:
         return np.zeros(0, dtype=np.intp)
-    ok = (blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA) & ~claimed
-    ci, white, noise = ink_spots(dot_image, ok, _FAR_TRIES)
-    if len(ci) == 0:
+    idx = np.flatnonzero((blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA)
+                         & ~claimed)
+    if len(idx) == 0:
         return np.zeros(0, dtype=np.intp)
-    _, n_ring, own = _faint_rings_round(dot_image, config, ci, white, noise)
-    ringed = (n_ring >= _ZOOM_MIN_RING) & (own <= 6.0 * blobs.area[ci])
-    order = np.argsort(np.where(ringed, -n_ring, 0), kind='stable')
+    white, noise, dark, sure = _ink_measures(dot_image, idx)
+    inked = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]
+    darkest = np.argsort(-dark, kind='stable')[:_FAR_TRIES]
+    pick = np.concatenate([inked, darkest[~sure[darkest]]])
+    ci = idx[pick]
+    _, n_ring, own = _faint_rings_round(dot_image, config, ci, white[pick], noise[pick])
+    ringed = (n_ring >= _ZOOM_MIN_RING) & (n_ring <= 3 * RING_POINTS) \
+        & (own <= 6.0 * blobs.area[ci])
+    looked = np.flatnonzero(ringed | sure[pick])
+    order = looked[np.argsort(np.where(ringed[looked], -n_ring[looked], 0), kind='stable')]
     return ci[order[:tries]].astype(np.intp)
 
 

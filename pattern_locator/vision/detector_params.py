@@ -46,7 +46,7 @@ class DetectorParams:
     # the card is dropped.
     max_code_candidates: int = 8
     # Where no card was read: this many blobs (far candidates not read, then
-    # small ink blobs that faint spots ring, then the darkest) are looked at
+    # small blobs that faint spots ring, then the darkest ink) are looked at
     # again in a window zoomed twice and sharpened (a far card through a
     # soft lens; vision.zoom). 0: never.
     zoom_tries: int = 3

@@ -229,12 +229,13 @@ def test_soft_far_card_no_stage_finds_is_read_in_a_zoomed_sharpened_window(index
 
 
 @pytest.mark.parametrize('seed, index', [(22, 15), (22, 38), (20, 17), (23, 11), (23, 19),
-                                         (25, 23)])
+                                         (25, 23), (23, 37), (24, 15), (24, 23)])
 def test_soft_far_card_behind_darker_blobs_is_zoomed_on(seed, index):
     # 6.6-7.9 m through a soft lens, on a background with darker small blobs
-    # than the card's centre: the darkest three small ink blobs miss it.
-    # Zoomed first: the far candidates not read (a ring showed round them at
-    # the image's scale; seed 22), then the blobs a few faint spots ring.
+    # than the card's centre, or a centre paler than the test of ink: the
+    # darkest three small ink blobs miss it. Zoomed first: the far
+    # candidates not read (a ring showed round them at the image's scale),
+    # then the blobs a few faint spots ring, ink or paler.
     from pattern_locator.evaluation import stress
     from pattern_locator.evaluation.bench import bench_cameras
 

@@ -52,8 +52,8 @@ _FAR_INK_DARKNESS = 0.4
 # to this area are the ones zoomed where no card was found (zoom_spots).
 _FAR_FULL_TRIES = 2
 _FAR_FULL_MAX_AREA = 32.0
-# Of the small ink blobs looked at for a zoom (the darkest _FAR_TRIES), those
-# with at least this many faint spots round them (and no bigger dark thing
+# Of the small blobs looked at for a zoom (zoom_spots), those with at least
+# this many faint spots round them (not a crowd, and no bigger dark thing
 # under them) go first: a soft far card's ring shows as a few faint spots.
 _ZOOM_MIN_RING = 3
 

@@ -189,9 +189,10 @@ class Detector:
         # stage again (at most params.zoom_tries windows of bounded size).
         # First the far candidates not read: a ring showed round them at the
         # image's scale (cards.far_candidates), too soft to read there. Then
-        # the darkest small ink blobs. None in a card read whole and seen in a
-        # mirror: its dots were sharp enough, and a zoom sees the same mirror
-        # (three windows on a glass door's card cost 10-20 ms at 1280x720).
+        # small blobs that faint spots ring, then the darkest ink blobs
+        # (cards.zoom_spots). None in a card read whole and seen in a mirror:
+        # its dots were sharp enough, and a zoom sees the same mirror (three
+        # windows on a glass door's card cost 10-20 ms at 1280x720).
         blobs = dot_image.blobs
         settled = claimed.copy()
         for H in scan.mirrored:
@@ -231,7 +232,7 @@ class Detector:
         ranked = rank_candidates(blobs, self.config, self.params,
                                  dot_image.noise_at(blobs.u, blobs.v))
 
-        far: List[np.ndarray] = []
+        far: List[np.ndarray] = []      # the far candidates, kept for the zoom
 
         def candidates() -> Iterator[int]:
             yield from ranked

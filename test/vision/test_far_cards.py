@@ -279,7 +279,7 @@ def test_a_card_read_whole_in_a_mirror_is_not_zoomed_on(monkeypatch, index):
 
     scan = DETECTOR._detect(image, camera)
     assert scan.cards == [] and len(scan.mirrored) == 1
-    # Without the rule the darkest small ink blobs are the mirrored card's.
+    # Without the rule, blobs the zoom would take are the mirrored card's.
     blobs = scan.dot_image.blobs
     darkest = card_stage.zoom_spots(scan.dot_image, CFG, scan.claimed, 3)
     assert on_card(blobs.u[darkest], blobs.v[darkest]).any()

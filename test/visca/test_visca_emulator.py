@@ -33,8 +33,13 @@ class Link:
         self.serial.close()
 
     def send(self, packet):
+        # Stamped before the write: the camera cannot act on a command before
+        # it is written, so times measured from here are never short (stamped
+        # after, a test thread descheduled for a millisecond on a busy
+        # machine saw a zoom end 1 ms before its travel time).
+        sent = time.monotonic()
         self.serial.write(packet)
-        return time.monotonic()
+        return sent
 
     def read(self, timeout=0.5):
         """Return the next packet, or None after ``timeout`` seconds of silence."""

@@ -232,13 +232,14 @@ class Detector:
         ranked = rank_candidates(blobs, self.config, self.params,
                                  dot_image.noise_at(blobs.u, blobs.v))
 
-        far: List[np.ndarray] = []      # the far candidates, kept for the zoom
+        far = np.zeros(0, dtype=np.intp)    # the far candidates, kept for the zoom
 
         def candidates() -> Iterator[int]:
+            nonlocal far
             yield from ranked
             # Then far cards whose ring dots decimation lost (bounded; see cards.py).
-            far.append(far_candidates(dot_image, self.config, ranked, claimed))
-            yield from far[0]
+            far = far_candidates(dot_image, self.config, ranked, claimed)
+            yield from far
 
         for ci in candidates():
             if claimed[ci]:
@@ -257,8 +258,7 @@ class Detector:
                 continue
             claimed |= self._covered(card.homography, blobs, camera)
             cards.append(card)
-        return _Scan(cards, dot_image, claimed, mirrored,
-                     far[0] if far else np.zeros(0, dtype=np.intp))
+        return _Scan(cards, dot_image, claimed, mirrored, far)
 
     def warm_up(self) -> int:
         """

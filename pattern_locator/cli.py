@@ -322,6 +322,11 @@ def _parser() -> argparse.ArgumentParser:
     demo.add_argument('--shutter', type=_number_in(0.0, 0.04, what='--shutter'),
                       default=0.004, help="floor routes: the camera's shutter the driver "
                       "sets, s (default 0.004 = 1/250; 0: the camera's auto exposure, 1/50)")
+    demo.add_argument('--real-time-factor', default=1.0,
+                      type=_number_in(0.05, 1.0, what='--real-time-factor'),
+                      help='floor routes: run the world this much slower than the wall, '
+                      "every node on the sim's /clock (a machine too slow to render 10 "
+                      'frames a second; default 1)')
     demo.add_argument('--estimator', choices=ESTIMATORS, default='exact',
                       help="the locator's pose estimator (default exact)")
     demo.add_argument('--stops', type=int, default=30, help='paper-stops: route stops (1-30)')
@@ -642,7 +647,8 @@ def _demo(args: argparse.Namespace) -> int:
                               output_dir=args.output_dir, seed=args.seed,
                               estimator=args.estimator, zoom_control=not args.no_zoom,
                               feed_forward=not args.no_feed_forward,
-                              interlace=args.interlace, shutter_s=args.shutter)
+                              interlace=args.interlace, shutter_s=args.shutter,
+                              real_time_factor=args.real_time_factor)
     if not 1 <= args.stops <= 30:
         raise ConfigError(f'demo: --stops must be 1..30, got {args.stops}')
     from .evaluation.demo_system import run_system_demo

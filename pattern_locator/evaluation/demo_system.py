@@ -381,8 +381,14 @@ DEMO_TARGETS = {'fix_coverage': 0.45, 'error_p95_m': 0.04, 'error_max_m': 0.20}
 def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: str = 'out',
                    seed: int = 7, estimator: str = 'exact', zoom_control: bool = True,
                    feed_forward: bool = True, interlace: bool = False,
-                   shutter_s: float = 0.004) -> int:
-    """Drive a floor route with sim, camera_driver and locator; print, plot, write the summary."""
+                   shutter_s: float = 0.004, real_time_factor: float = 1.0) -> int:
+    """
+    Drive a floor route with sim, camera_driver and locator; print, plot, write the summary.
+
+    ``real_time_factor`` below 1 runs the sim's world that much slower than
+    the wall, and every node on its /clock (a machine too slow to render the
+    frames in real time).
+    """
     from dataclasses import replace
     from .drive_demo import (DriveSetup, judge, plot_drive, room_table, run_drive,
                              write_summary)
@@ -392,7 +398,8 @@ def run_floor_demo(route: str = 'loop', max_speed_m_s: float = 0.5, output_dir: 
     world = load_floor_world()
     setup = DriveSetup(route=route, max_speed_m_s=max_speed_m_s, seed=seed,
                        estimator=estimator, zoom_control=zoom_control,
-                       feed_forward=feed_forward, interlace=interlace, shutter_s=shutter_s)
+                       feed_forward=feed_forward, interlace=interlace, shutter_s=shutter_s,
+                       sim_time=real_time_factor < 1.0, real_time_factor=real_time_factor)
     drive_route = world.route(route, replace(world.limits, max_speed_m_s=max_speed_m_s))
     print(f'pattern_locator demo: sim + camera_driver + locator over DDS (domain '
           f"{os.environ.get('ROS_DOMAIN_ID', '0')}): the robot drives route '{route}' of "

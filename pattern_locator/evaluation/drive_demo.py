@@ -276,6 +276,9 @@ class DriveSetup:
     until_s: float = 0.0              # > 0: stop after this much route time
     camera_init_s: float = 1.0        # the emulated camera's power-up
     sim_time: bool = False            # the sim publishes /clock, every node runs on it
+    # < 1 (with sim_time): the sim's world and clock run this much slower than the
+    # wall, so a slow machine renders every frame of a sim second (a faster computer).
+    real_time_factor: float = 1.0
     record_odometry: bool = False
     namespace: str = ''
     driver_parameters: Tuple[str, ...] = ()
@@ -303,7 +306,10 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
     out.mkdir(parents=True, exist_ok=True)
     world = load_floor_world()
     duration = world.route(setup.route, _limits(world, setup)).duration_s
-    timeout = setup.timeout_s or duration + 90.0
+    if setup.real_time_factor < 1.0 and not setup.sim_time:
+        raise PatternLocatorError('a real-time factor below 1 needs sim_time (the slowed '
+                                  'time is on /clock)')
+    timeout = setup.timeout_s or duration / setup.real_time_factor + 90.0
     context = Context()
     rclpy.init(context=context)
     locator_map = setup.building_map or str(config_path('floor_building.yaml'))
@@ -329,7 +335,8 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                 f'exposure_s:={float(setup.exposure_s)}',
                 f'frame_rate_hz:={float(setup.frame_rate_hz)}',
                 f'head_mount_pitch_deg:={pitch}',
-                f'publish_clock:={str(setup.sim_time).lower()}'], setup.namespace,
+                f'publish_clock:={str(setup.sim_time).lower()}',
+                f'real_time_factor:={float(setup.real_time_factor)}'], setup.namespace,
                 sim_time) as sim, \
                 node_process('camera_driver_node', out / 'camera_driver.log', [
                     f'port:={link}', f'zoom_control:={str(setup.zoom_control).lower()}',
@@ -371,7 +378,7 @@ def run_drive(out: Path, setup: DriveSetup, progress: bool = False) -> DriveObse
                 if observer.sim_message == 'finished' or (
                         setup.until_s > 0.0 and route_time >= setup.until_s):
                     finished_at = finished_at or time.monotonic()
-                    if time.monotonic() - finished_at > 0.5:
+                    if time.monotonic() - finished_at > 0.5 / setup.real_time_factor:
                         break
             else:
                 print(f'drive: the route did not finish within {timeout:.0f} s',

@@ -37,10 +37,16 @@ Publishes
     ``/diagnostics`` (the route's state and the rendering's cost, 1 Hz);
     ``/clock`` (rosgraph_msgs/Clock) with ``publish_clock``.
 
-Time: frames, odometry and diagnostics run on the steady clock. Stamps are
-the node's ROS time, or with ``publish_clock`` the sim's own time (seconds
-since the node started), which it publishes on ``/clock`` for nodes with
-``use_sim_time``. ``frame_rate_hz``, ``jpeg_quality`` and ``loop`` can be set
+Time: frames and odometry run on the sim's clock, diagnostics on the steady
+clock. The sim's clock is the steady clock, or with ``real_time_factor``
+below 1 (and ``publish_clock``) the steady clock slowed that much
+(:class:`~pattern_locator.sim.sim_clock.ScaledClock`): the route, the
+odometry and the emulated camera run slower than the wall, and a machine too
+slow to render ``frame_rate_hz`` in real time still gives the stack every
+frame of each sim second. Stamps are the node's ROS time, or with
+``publish_clock`` the sim's own time (seconds since the node started), which
+it publishes on ``/clock`` for nodes with ``use_sim_time``.
+``frame_rate_hz``, ``jpeg_quality`` and ``loop`` can be set
 at run time; the world, the route and the camera are read-only.
 
 The route clock starts once the camera has been addressed and has finished
@@ -84,6 +90,7 @@ from ..sim.floor_scene import FloorScene
 from ..sim.floor_sim import Exposure, FloorSim, FrameTruth, HeadTrack, RoomRoute
 from ..sim.floor_world import FloorWorld
 from ..sim.odometry import OdometryModel, OdomSample
+from ..sim.sim_clock import ScaledClock
 from ..sim.world import PAPER_FLOOR, PAPER_ROOM, RouteStop, SimRoute
 from ..visca.emulator import EmulatedEviD31
 from ..visca.zoom_table import ZoomTable
@@ -126,6 +133,9 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('publish_clock', False, 'publish the sim time on /clock and stamp with it (for '
           'nodes with use_sim_time)'),
     Param('clock_rate_hz', 100.0, '/clock messages per second', 1.0, 1000.0),
+    Param('real_time_factor', 1.0, 'sim seconds per wall second: below 1 the route, the '
+          'odometry, the emulated camera and /clock run that much slower, so a machine too '
+          'slow to render in real time drops no frames (needs publish_clock)', 0.05, 1.0),
     Param('camera_link', '', 'path of the emulated camera port (a symlink to its '
           'pseudo-terminal; empty: a per-process temporary path)'),
     Param('zoom_table', '', 'zoom -> intrinsics YAML (empty: the shipped '
@@ -279,14 +289,21 @@ class SimNode(Node):
                       (first.floor, first.room))
         link = p['camera_link'] or default_camera_link()
         Path(link).parent.mkdir(parents=True, exist_ok=True)
+        if p['real_time_factor'] < 1.0 and not p['publish_clock']:
+            # On ROS time the stamps would run at the wall's pace, the world slower.
+            raise ConfigError(f"sim: real_time_factor {p['real_time_factor']} needs "
+                              'publish_clock (the slowed time is only on /clock)')
+        # Every time of the node is on this clock (the steady clock when the factor is 1).
+        self._sim_clock = ScaledClock(p['real_time_factor'])
         self.camera = EmulatedEviD31(field_rate_hz=p['field_rate_hz'], init_s=p['init_s'],
                                      link_path=link, seed=p['seed'],
-                                     auto_shutter_s=p['exposure_s']).start()
+                                     auto_shutter_s=p['exposure_s'], clock=self._sim_clock,
+                                     clock_rate=self._sim_clock.rate).start()
         self._head = HeadTrack(max_samples=128)
         self._head_lock = threading.Lock()
         self._zoom_units = 0.0
         self._shutter_s = p['exposure_s']
-        self._clock_origin = time.monotonic()
+        self._clock_origin = self._sim_clock()
         self._route_start: Optional[float] = None
         self._route_start_stamp = 0
         # When the camera was first ready (the stack's wait runs from then).
@@ -324,10 +341,12 @@ class SimNode(Node):
         for line in describe_values(p):
             self.get_logger().info('sim configuration: ' + line)
         self.get_logger().info(f'route: {what}')
-        wall_timer(self, 1.0 / p['odom_rate_hz'], self._on_odometry_timer)
+        # Rates per sim second (a slowed sim also publishes less per wall second).
+        wall_s = self._sim_clock.wall_s
+        wall_timer(self, wall_s(1.0 / p['odom_rate_hz']), self._on_odometry_timer)
         wall_timer(self, 1.0, self._publish_diagnostics)
         if self.pub_clock is not None:
-            wall_timer(self, 1.0 / p['clock_rate_hz'], self._publish_clock)
+            wall_timer(self, wall_s(1.0 / p['clock_rate_hz']), self._publish_clock)
         self.parameters.on_change(lambda values: None, self._apply)
         # Frames are rendered on a thread of their own, so the odometry and the
         # parameter services keep their pace while a frame renders.
@@ -354,10 +373,10 @@ class SimNode(Node):
     # Clocks -----------------------------------------------------------------------------
 
     def _stamp_ns(self, mono: float) -> int:
-        """Return the ROS stamp (ns) of a steady-clock time."""
+        """Return the ROS stamp (ns) of a time of the sim's clock."""
         if self.pub_clock is not None:
             return int(round((mono - self._clock_origin) * 1e9))
-        return self.get_clock().now().nanoseconds - int(round((time.monotonic() - mono) * 1e9))
+        return self.get_clock().now().nanoseconds - int(round((self._sim_clock() - mono) * 1e9))
 
     @staticmethod
     def _time_msg(ns: int):
@@ -366,7 +385,7 @@ class SimNode(Node):
 
     def _publish_clock(self) -> None:
         msg = Clock()
-        msg.clock = self._time_msg(self._stamp_ns(time.monotonic()))
+        msg.clock = self._time_msg(self._stamp_ns(self._sim_clock()))
         self.pub_clock.publish(msg)
 
     def _sample_head(self) -> float:
@@ -459,9 +478,9 @@ class SimNode(Node):
     # Frames -----------------------------------------------------------------------------
 
     def _frame_loop(self) -> None:
-        due = time.monotonic()
+        due = self._sim_clock()
         while not self._stopping.is_set():
-            self._stopping.wait(max(0.0, due - time.monotonic()))
+            self._stopping.wait(max(0.0, self._sim_clock.wall_s(due - self._sim_clock())))
             if self._stopping.is_set():
                 break
             try:
@@ -473,10 +492,10 @@ class SimNode(Node):
                     raise
                 return
             due += 1.0 / self.params['frame_rate_hz']
-            if due < time.monotonic():
+            if due < self._sim_clock():
                 # Late (a loaded machine): the next frame now, never a burst.
                 self._late_frames += 1
-                due = time.monotonic()
+                due = self._sim_clock()
 
     def _frame(self) -> None:
         now = self._sample_head()
@@ -556,7 +575,7 @@ class SimNode(Node):
         return 'finished' if self._finished else 'driving'
 
     def _publish_diagnostics(self) -> None:
-        now = time.monotonic()
+        now = self._sim_clock()
         route_time = now - self._route_start if self._route_start is not None else 0.0
         render = list(self._render_ms)
         status = DiagnosticStatus()
@@ -578,6 +597,7 @@ class SimNode(Node):
             # The camera's shutter the frames are exposed with (the driver may set it).
             'exposure ms': f'{self.sim.exposure.exposure_s * 1e3:g}',
             'odometry messages': self._odometry_sent,
+            'real time factor': f'{self._sim_clock.rate:g}',
         }
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         array = DiagnosticArray()

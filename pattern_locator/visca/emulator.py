@@ -186,7 +186,9 @@ class EmulatedEviD31:
     A Sony EVI-D31 answering VISCA on a pseudo-terminal; see the module docstring.
 
     ``start()`` opens the pty and the emulator thread; open :attr:`port`
-    with pyserial at 9600 baud. Times come from ``time.monotonic()``. The
+    with pyserial at 9600 baud. Times come from ``clock`` (``time.monotonic``;
+    a sim's slowed clock runs the head's motion and the line's bytes at
+    ``clock_rate`` of its seconds per wall second). The
     camera itself is :class:`~pattern_locator.visca.emulator_device.EmulatedDevice`
     behind a :class:`~pattern_locator.visca.emulator_protocol.ViscaResponder`,
     the line a :class:`~pattern_locator.visca.emulator_line.PtyLine`, the faults
@@ -197,9 +199,14 @@ class EmulatedEviD31:
     def __init__(self, field_rate_hz: float = 50.0, init_s: float = 2.0, reset_s: float = 2.5,
                  pace_output: bool = True, link_path: Optional[str] = None, seed: int = 0,
                  require_address_set: bool = True, zoom_full_s: float = 2.2,
-                 baud: int = DEFAULT_BAUD, auto_shutter_s: float = 0.02) -> None:
+                 baud: int = DEFAULT_BAUD, auto_shutter_s: float = 0.02,
+                 clock: Callable[[], float] = time.monotonic, clock_rate: float = 1.0) -> None:
         if field_rate_hz <= 0.0:
             raise ValueError(f'field rate {field_rate_hz} Hz is not positive')
+        if not (math.isfinite(clock_rate) and clock_rate > 0.0):
+            raise ValueError(f'clock rate {clock_rate} is not positive')
+        self._clock = clock
+        self._clock_rate = float(clock_rate)
         # 0: an idealised instant exposure (a sim without motion blur).
         if not (math.isfinite(auto_shutter_s) and 0.0 <= auto_shutter_s <= 1.0):
             raise ValueError(f'auto exposure time {auto_shutter_s} s is not in [0, 1]')
@@ -237,7 +244,7 @@ class EmulatedEviD31:
             self._wake_r, self._wake_w = os.pipe()
             os.set_blocking(self._wake_w, False)
             self._line.open()
-            self._power_up(time.monotonic())
+            self._power_up(self._clock())
             self._thread = threading.Thread(target=self._run, name='fake-evi-d31', daemon=True)
             self._thread.start()
         return self
@@ -290,7 +297,7 @@ class EmulatedEviD31:
     def state(self) -> HeadState:
         """Return the head's state now (thread-safe)."""
         with self._lock:
-            return self._device.state(time.monotonic())
+            return self._device.state(self._clock())
 
     @property
     def stats(self) -> EmulatorStats:
@@ -316,13 +323,13 @@ class EmulatedEviD31:
     def send_garbage(self, data: bytes) -> None:
         """Write ``data`` to the driver as they are (no faults applied)."""
         with self._lock:
-            self._line.send(bytes(data), time.monotonic())
+            self._line.send(bytes(data), self._clock())
         self._wake()
 
     def send_network_change(self) -> None:
         """Send Network Change ``z0 38 FF`` now (no faults applied)."""
         with self._lock:
-            self._line.send(network_change(self._device.reply_address()), time.monotonic())
+            self._line.send(network_change(self._device.reply_address()), self._clock())
         self._wake()
 
     def stop_answering(self, silent: bool = True) -> None:
@@ -343,7 +350,7 @@ class EmulatedEviD31:
     def power_cycle(self) -> None:
         """Switch the camera off and on: initialisation and Network Change again."""
         with self._lock:
-            self._power_up(time.monotonic())
+            self._power_up(self._clock())
         self._wake()
 
     # Thread -------------------------------------------------------------------------------
@@ -376,7 +383,7 @@ class EmulatedEviD31:
 
     def _run(self) -> None:
         period = 1.0 / self.field_rate_hz
-        next_field = time.monotonic()
+        next_field = self._clock()
         while True:
             with self._lock:
                 if self._stopping:
@@ -387,7 +394,7 @@ class EmulatedEviD31:
                         function()
                     finally:
                         done.set()
-                now = time.monotonic()
+                now = self._clock()
                 if now >= next_field:
                     self._field(now)
                     next_field += period
@@ -402,7 +409,8 @@ class EmulatedEviD31:
                 master = self._line.master
                 fds = [self._wake_r] + ([master] if master is not None else [])
             try:
-                readable, _, _ = select.select(fds, [], [], max(0.0, wake_at - time.monotonic()))
+                wait_s = max(0.0, (wake_at - self._clock()) / self._clock_rate)
+                readable, _, _ = select.select(fds, [], [], wait_s)
             except (OSError, ValueError):
                 continue
             if self._wake_r in readable:
@@ -417,7 +425,7 @@ class EmulatedEviD31:
                     data = b''  # EIO/EAGAIN: nothing to read this time.
                 if data:
                     with self._lock:
-                        self._line.receive(data, time.monotonic(), discard=self._silent)
+                        self._line.receive(data, self._clock(), discard=self._silent)
 
     # Camera -------------------------------------------------------------------------------
 

@@ -55,6 +55,9 @@ def test_a_bad_parameter_at_start_is_one_line_and_exit_1():
          'camera_driver: error: tracking: search_after_s (0.6) must be >= target_timeout_s'),
         ('sim_node', ['mode:=fly'],
          "sim: error: parameter mode must be one of stops, drive, got 'fly'"),
+        # A slowed world on ROS time would stamp at the wall's pace.
+        ('sim_node', ['real_time_factor:=0.5'],
+         'sim: error: sim: real_time_factor 0.5 needs publish_clock'),
     ]
     procs = [subprocess.Popen(node_command(module, parameters), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)

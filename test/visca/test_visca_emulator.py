@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+from pattern_locator.sim.sim_clock import ScaledClock
 from pattern_locator.visca import protocol as visca
 from pattern_locator.visca.emulator import EmulatedEviD31
 from pattern_locator.visca.protocol import hex_bytes, PacketFramer
@@ -608,3 +609,27 @@ def test_run_fake_camera_prints_its_port_and_stops_on_sigterm(tmp_path):
             process.kill()
             process.wait()
     assert not path.exists()
+
+
+def test_a_slowed_clock_slows_the_head_and_the_line(tmp_path):
+    # A sim at half the wall's pace: the move's 0.625 s are 0.625 s of its
+    # clock, 1.25 s of the wall; the camera's state is on its clock too.
+    clock = ScaledClock(0.5)
+    with EmulatedEviD31(init_s=0.03, link_path=str(tmp_path / 'ttyVISCA'), clock=clock,
+                        clock_rate=clock.rate) as cam:
+        ready(cam)
+        port = Link(cam.port)
+        port.setup()
+        sent, sent_sim = port.send(visca.pan_tilt_absolute(1, 0x18, 0x14, 440, -120)), clock()
+        port.expect(h('90 41 FF'), timeout=1.0)
+        done = port.expect(h('90 51 FF'), timeout=3.0)
+        assert 1.25 < done - sent < 1.25 + 2 * (2 * FIELD_S + 0.02) + SLACK_S
+        state = cam.state()
+        assert state.stamp > sent_sim + 0.625 and state.pan_deg == pytest.approx(50.0, abs=0.1)
+        # 11 bytes of answer at 9600 baud: 11.5 ms of its clock, 23 ms of the wall.
+        began = time.monotonic()
+        port.ask(visca.inquiry_pan_tilt_position(1), timeout=1.0)
+        assert time.monotonic() - began > 2 * 11 * 1.04e-3
+        port.close()
+    with pytest.raises(ValueError, match='clock rate'):
+        EmulatedEviD31(clock_rate=0.0)

@@ -187,22 +187,25 @@ class Detector:
         # No card read: a far card through a soft lens may be where the small
         # ink blobs are. Each window zoomed and sharpened goes through every
         # stage again (at most params.zoom_tries windows of bounded size).
-        # First the far candidates not read: a ring showed round them at the
-        # image's scale (cards.far_candidates), too soft to read there. Then
-        # small blobs that faint spots ring, then the darkest ink blobs
-        # (cards.zoom_spots). None in a card read whole and seen in a mirror:
-        # its dots were sharp enough, and a zoom sees the same mirror (three
-        # windows on a glass door's card cost 10-20 ms at 1280x720).
+        # First the far candidates: a ring showed round them at the image's
+        # scale (cards.far_candidates), too soft to read there whole (a card
+        # found there with slots it could not read claims them, and the zoom
+        # may read it whole). Then small blobs that faint spots ring, then the
+        # darkest ink blobs (cards.zoom_spots). None in a card read whole and
+        # seen in a mirror: its dots were sharp enough, and a zoom sees the
+        # same mirror (three windows on a glass door's card cost 10-20 ms at
+        # 1280x720).
         blobs = dot_image.blobs
-        settled = claimed.copy()
+        in_mirror = np.zeros(len(blobs), dtype=bool)
         for H in scan.mirrored:
-            settled |= self._covered(H, blobs, camera)
+            in_mirror |= self._covered(H, blobs, camera)
         tries = self.params.zoom_tries
-        order = [int(j) for j in scan.far if not settled[j]]
-        order += [int(j) for j in zoom_spots(dot_image, self.config, settled, tries)
+        order = [int(j) for j in scan.far if not in_mirror[j]]
+        order += [int(j) for j in zoom_spots(dot_image, self.config, claimed | in_mirror, tries)
                   if int(j) not in order]
+        zoomed = np.zeros(len(blobs), dtype=bool)     # blobs of the cards the windows read
         for j in order[:tries]:
-            if claimed[j]:
+            if zoomed[j]:
                 continue
             radius = max(blobs.extent(int(j)), float(np.sqrt(blobs.area[j] / np.pi)))
             half = int(min(_ZOOM_MAX_HALF, 2.2 * self._rho_out * radius + 8))
@@ -218,7 +221,10 @@ class Detector:
                 if card.ids is None or card.slots_from_map or card.candidates or \
                         np.hypot(*(card.centre_px - (blobs.u[j], blobs.v[j]))) > radius:
                     continue
-                claimed |= self._covered(card.homography, blobs, camera)
+                # It replaces the card the image's scale found there unread.
+                cards = [k for k in cards if k.ids is not None
+                         or not self._covered(k.homography, blobs, camera)[j]]
+                zoomed |= self._covered(card.homography, blobs, camera)
                 cards.append(card)
         return cards
 

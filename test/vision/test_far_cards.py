@@ -346,6 +346,25 @@ def stress_far_frame(seed, index):
     return frames, frame, camera, stress.render_frame(frame, camera, CFG, 'dots')
 
 
+@pytest.mark.parametrize('seed, index', [(20, 26), (21, 33), (24, 35)])
+def test_far_card_found_with_slots_unread_is_zoomed_on_and_read_whole(seed, index):
+    # 7.2-7.3 m, 55-59 degrees off the card's normal, at 1280x720: at the
+    # image's scale the card is found from its far candidate but read only
+    # in part (1-3 slots from the map), so no id. Its blobs were claimed by
+    # that reading, and the zoom never looked there; zoomed, it is read whole
+    # and replaces the partial reading.
+    from pattern_locator.vision.locate import CardLocator
+    from pattern_locator.evaluation import stress
+
+    frames, frame, camera, image = stress_far_frame(seed, index)
+    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    scan = detector._detect(image, camera)
+    assert [card.ids for card in scan.cards] == [None]
+    assert scan.cards[0].slots_from_map > 0 and len(scan.far) > 0
+    (card,) = detector.detect(image, camera)
+    assert card.ids == frame.ids and card.slots_from_map == 0 and card.n_points == 17
+
+
 def detector_readings(monkeypatch, image, camera, locator=None):
     """Locate (or detect) the cards; return them and each reading made, as (colour, reading)."""
     calls = []

@@ -45,7 +45,7 @@ from .detector_params import DetectorParams
 from .dots import check_image, DotImage, segment
 from .drawn_card import drawn_cards
 from .stats import median
-from .zoom import zoom_window, ZOOMED_PIXEL_SIGMA
+from .zoom import zoom_window, ZOOMED_PIXEL_SIGMA, ZoomedWindow
 from ..card.pattern import Code, Ids, PatternConfig, RING_POINTS
 from ..errors import CodeError
 
@@ -162,6 +162,10 @@ class Detector:
         # code the configuration has: bounded, whatever the uptime.
         self._ids: Dict[Code, Optional[Ids]] = {}
         self._outer = config.model_points()[1:1 + RING_POINTS, :2]
+        # The outer ring's dots' outer edges, and a dot's width beyond: a zoomed
+        # window that holds all of these holds the whole card.
+        self._outer_rim = self._outer * (
+            1.0 + 3.0 * config.ring_dot_radius / config.ring_radii[0])
         half = config.card_size / 2
         # How the card's plane is shared between the windows of its dots: before
         # point 1 is known, with every place a mark may be; after, with the
@@ -213,13 +217,16 @@ class Detector:
             if window is None:
                 continue
             for card in self._detect(window.image, window.camera).cards:
+                # Only the card whose centre was zoomed on, read whole, or
+                # with slots from the map only where the window holds all of
+                # it: the window's edge may hide part of any other (a near
+                # card's ring dot is as small as a far centre), and what an
+                # edge hides is not a hidden slot.
+                if card.ids is None or card.candidates or (
+                        card.slots_from_map and not self._held(card, window)):
+                    continue
                 card = _in_image(card, window.to_image())
-                # Only the card whose centre was zoomed on, read whole and
-                # without the map: the window's edge may hide part of any
-                # other (a near card's ring dot is as small as a far
-                # centre), and what an edge hides is not a hidden slot.
-                if card.ids is None or card.slots_from_map or card.candidates or \
-                        np.hypot(*(card.centre_px - (blobs.u[j], blobs.v[j]))) > radius:
+                if np.hypot(*(card.centre_px - (blobs.u[j], blobs.v[j]))) > radius:
                     continue
                 # It replaces the card the image's scale found there unread.
                 cards = [k for k in cards if k.ids is not None
@@ -227,6 +234,15 @@ class Detector:
                 zoomed |= self._covered(card.homography, blobs, camera)
                 cards.append(card)
         return cards
+
+    def _held(self, card: CardDetection, window: ZoomedWindow) -> bool:
+        """Tell whether a card found in ``window`` lies wholly inside it, a dot's width in."""
+        rim = apply_h(card.homography, self._outer_rim)
+        if window.camera is not None and window.camera.has_distortion:
+            rim = window.camera.distort_pixels(rim)
+        h, w = window.image.shape[:2]
+        return bool(np.all(np.isfinite(rim)) and np.all(rim >= 0.0)
+                    and np.all(rim[:, 0] <= w - 1) and np.all(rim[:, 1] <= h - 1))
 
     def _detect(self, image: np.ndarray, camera: Optional[CameraModel]) -> '_Scan':
         """Find the cards at the image's own scale (:class:`_Scan`)."""

@@ -346,6 +346,41 @@ def stress_far_frame(seed, index):
     return frames, frame, camera, stress.render_frame(frame, camera, CFG, 'dots')
 
 
+@pytest.mark.parametrize('seed, index', [(23, 15), (24, 21), (25, 21)])
+def test_soft_far_card_wholly_in_its_window_may_take_a_slot_from_the_map(seed, index):
+    # 7.3-7.9 m through a soft lens: zoomed, one slot is too soft to read in
+    # either ring, and the map's codes fill it. A window's edge cuts no dot
+    # of this card (all of it lies a dot's width inside), so that slot is
+    # unreadable, not cut off: the card is taken. Without the map, no id.
+    from pattern_locator.evaluation import stress
+    from pattern_locator.evaluation.bench import bench_cameras
+    from pattern_locator.vision.locate import CardLocator
+
+    frames = stress.make_frames(CFG, 20, seed, ['far soft'])
+    frame = frames[index]
+    camera = bench_cameras()[frame.camera_name]
+    image = stress.render_frame(frame, camera, CFG, 'dots')
+    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    (card,) = detector.detect(image, camera)
+    assert card.ids == frame.ids and card.slots_from_map == 1
+    assert not any(found.ids is not None for found in DETECTOR.detect(image, camera))
+
+
+def test_a_zoomed_card_the_window_edge_cuts_is_not_held():
+    # The rule above, on the card's place in its window: moved until the
+    # window's edge cuts its outer ring, it is no longer held.
+    from pattern_locator.vision.zoom import zoom_window
+
+    image, dots = far_frame(HD, 6.5, 15.0, 40.0, 5.0, (0.0, 0.0), (3, 12, 4))
+    window = zoom_window(image, HD, float(dots[0, 0]), float(dots[0, 1]), 40)
+    (card,) = [c for c in DETECTOR._detect(window.image, window.camera).cards if c.ids]
+    assert DETECTOR._held(card, window)
+    h, w = window.image.shape[:2]
+    for dx, dy in ((w / 3, 0.0), (-w / 3, 0.0), (0.0, h / 3), (0.0, -h / 3)):
+        moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ card.homography
+        assert not DETECTOR._held(dataclasses.replace(card, homography=moved), window)
+
+
 @pytest.mark.parametrize('seed, index', [(20, 26), (21, 33), (24, 35)])
 def test_far_card_found_with_slots_unread_is_zoomed_on_and_read_whole(seed, index):
     # 7.2-7.3 m, 55-59 degrees off the card's normal, at 1280x720: at the

@@ -18,10 +18,11 @@ import pytest
 
 UNTIL_S = 23.0
 # The sim's world runs at 0.4 of the wall's pace (its real-time factor, on its
-# /clock): the sim renders each frame in 30-80 ms of CPU on a quiet machine but
-# 250-500 ms beside the locator and the driver on a slow 2-core one, which
-# dropped it to 2 frames a second of the wall. Slowed, every machine gives the
-# stack the same frames per second of its time, as a faster computer would.
+# /clock): the sim renders a frame in 30-80 ms on a quiet machine, but on a
+# slow 2-core one beside the locator and the driver in 260-290 ms (median),
+# under 2 frames a second of the wall (43 images where 69 were asked). Slowed,
+# every machine gives the stack the frames of each second of its time, as a
+# faster computer would.
 REAL_TIME_FACTOR = 0.4
 
 

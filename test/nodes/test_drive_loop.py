@@ -29,7 +29,7 @@ REAL_TIME_FACTOR = 0.4
 @pytest.fixture(scope='module')
 def short_drive(tmp_path_factory):
     out = tmp_path_factory.mktemp('drive')
-    setup = DriveSetup(route='short', until_s=UNTIL_S, record_odometry=True, timeout_s=120.0,
+    setup = DriveSetup(route='short', until_s=UNTIL_S, record_odometry=True, timeout_s=180.0,
                        camera_init_s=0.3, sim_time=True, real_time_factor=REAL_TIME_FACTOR)
     observer = run_drive(out, setup)
     world = load_floor_world()

@@ -277,7 +277,7 @@ class DriveSetup:
     camera_init_s: float = 1.0        # the emulated camera's power-up
     sim_time: bool = False            # the sim publishes /clock, every node runs on it
     # < 1 (with sim_time): the sim's world and clock run this much slower than the
-    # wall, so a slow machine renders every frame of a sim second (a faster computer).
+    # wall, so a slow machine renders the frames of a sim second a faster one would.
     real_time_factor: float = 1.0
     record_odometry: bool = False
     namespace: str = ''

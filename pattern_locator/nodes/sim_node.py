@@ -42,8 +42,9 @@ clock. The sim's clock is the steady clock, or with ``real_time_factor``
 below 1 (and ``publish_clock``) the steady clock slowed that much
 (:class:`~pattern_locator.sim.sim_clock.ScaledClock`): the route, the
 odometry and the emulated camera run slower than the wall, and a machine too
-slow to render ``frame_rate_hz`` in real time still gives the stack every
-frame of each sim second. Stamps are the node's ROS time, or with
+slow to render ``frame_rate_hz`` in real time gives the stack the frames of
+each sim second that a faster one would (all of them at a low enough
+factor). Stamps are the node's ROS time, or with
 ``publish_clock`` the sim's own time (seconds since the node started), which
 it publishes on ``/clock`` for nodes with ``use_sim_time``.
 ``frame_rate_hz``, ``jpeg_quality`` and ``loop`` can be set
@@ -135,7 +136,7 @@ PARAMETERS: Tuple[Param, ...] = (
     Param('clock_rate_hz', 100.0, '/clock messages per second', 1.0, 1000.0),
     Param('real_time_factor', 1.0, 'sim seconds per wall second: below 1 the route, the '
           'odometry, the emulated camera and /clock run that much slower, so a machine too '
-          'slow to render in real time drops no frames (needs publish_clock)', 0.05, 1.0),
+          'slow to render in real time drops fewer frames (needs publish_clock)', 0.05, 1.0),
     Param('camera_link', '', 'path of the emulated camera port (a symlink to its '
           'pseudo-terminal; empty: a per-process temporary path)'),
     Param('zoom_table', '', 'zoom -> intrinsics YAML (empty: the shipped '

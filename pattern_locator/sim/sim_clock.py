@@ -6,8 +6,8 @@ skips frames, so what the stack sees depends on the machine. Run the world
 (route, odometry, the emulated camera's motion and its serial line) on a
 clock that advances ``rate`` sim seconds per wall second, and every frame
 gets ``1 / rate`` times the wall time: a stack on sim time (``/clock``,
-``use_sim_time``) then sees the same frame rate on any machine, as on a
-computer ``1 / rate`` times faster (Gazebo's real-time factor).
+``use_sim_time``) then sees the frames a computer ``1 / rate`` times faster
+would give it (Gazebo's real-time factor).
 """
 
 import math

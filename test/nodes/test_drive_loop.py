@@ -21,7 +21,7 @@ UNTIL_S = 23.0
 # /clock): the sim renders a frame in 30-80 ms on a quiet machine, but on a
 # slow 2-core one beside the locator and the driver in 260-290 ms (median),
 # under 2 frames a second of the wall (43 images where 69 were asked). Slowed,
-# every machine gives the stack the frames of each second of its time, as a
+# a slow machine gives the stack the frames of each second of its time that a
 # faster computer would.
 REAL_TIME_FACTOR = 0.4
 

@@ -304,7 +304,6 @@ class SimNode(Node):
         self._head_lock = threading.Lock()
         self._zoom_units = 0.0
         self._shutter_s = p['exposure_s']
-        self._clock_origin = self._sim_clock()
         self._route_start: Optional[float] = None
         self._route_start_stamp = 0
         # When the camera was first ready (the stack's wait runs from then).
@@ -373,11 +372,11 @@ class SimNode(Node):
 
     # Clocks -----------------------------------------------------------------------------
 
-    def _stamp_ns(self, mono: float) -> int:
+    def _stamp_ns(self, at: float) -> int:
         """Return the ROS stamp (ns) of a time of the sim's clock."""
         if self.pub_clock is not None:
-            return int(round((mono - self._clock_origin) * 1e9))
-        return self.get_clock().now().nanoseconds - int(round((self._sim_clock() - mono) * 1e9))
+            return int(round((at - self._sim_clock.origin) * 1e9))
+        return self.get_clock().now().nanoseconds - int(round((self._sim_clock() - at) * 1e9))
 
     @staticmethod
     def _time_msg(ns: int):

@@ -67,6 +67,8 @@ _REFIT_MIN = 7
 _RING_REFIT_MIN = 12
 # A zoomed window's half side (image pixels), at most: a card at 5.5 m and beyond.
 _ZOOM_MAX_HALF = 48
+# The card's centre on its plane (metres).
+_PLANE_ORIGIN = np.zeros((1, 2))
 # 64 points round the unit circle: a found card's outer disc, for the box of
 # the blobs it may cover (Detector._covered).
 _UNIT_CIRCLE = np.column_stack([np.cos(np.linspace(0.0, 2 * np.pi, 64, endpoint=False)),
@@ -237,9 +239,7 @@ class Detector:
 
     def _held(self, card: CardDetection, window: ZoomedWindow) -> bool:
         """Tell whether a card found in ``window`` lies wholly inside it, a dot's width in."""
-        rim = apply_h(card.homography, self._outer_rim)
-        if window.camera is not None and window.camera.has_distortion:
-            rim = window.camera.distort_pixels(rim)
+        rim = _plane_pixels(card.homography, self._outer_rim, window.camera)
         h, w = window.image.shape[:2]
         return bool(np.all(np.isfinite(rim)) and np.all(rim >= 0.0)
                     and np.all(rim[:, 0] <= w - 1) and np.all(rim[:, 1] <= h - 1))
@@ -368,9 +368,7 @@ class Detector:
         # cost milliseconds. The box is the disc's edge, seen through the
         # homography and the lens at 64 points, grown by a twentieth (the
         # edge between two points bulges out by a thousandth of its size).
-        edge = apply_h(H, reach * _UNIT_CIRCLE)
-        if camera is not None:
-            edge = camera.distort_pixels(edge)
+        edge = _plane_pixels(H, reach * _UNIT_CIRCLE, camera)
         if not np.isfinite(edge).all():
             return self._in_disc(H, blobs.u, blobs.v, reach, camera)
         lo, hi = edge.min(axis=0), edge.max(axis=0)
@@ -507,17 +505,13 @@ class Detector:
             first = complete[0]
             ring_px = points[1 + first * RING_POINTS:1 + (first + 1) * RING_POINTS]
         else:
-            ring_px = apply_h(H_final, self._outer)
-            if camera is not None and camera.has_distortion:
-                ring_px = camera.distort_pixels(ring_px)
+            ring_px = _plane_pixels(H_final, self._outer, camera)
         # Half the largest distance between two of the outer ring's points.
         between = ring_px[:, None] - ring_px[None]
         size = 0.5 * float(np.sqrt(np.max(np.sum(between * between, axis=2))))
         fitted_centre = None
         if not valid[0]:
-            fitted_centre = H_final[:2, 2] / H_final[2, 2]
-            if camera is not None and camera.has_distortion:
-                fitted_centre = camera.distort_pixels(fitted_centre[None])[0]
+            fitted_centre = _plane_pixels(H_final, _PLANE_ORIGIN, camera)[0]
         return CardDetection(code, ids, points, areas, tuple(complete), size, H_final,
                              float(margin), tuple(ring_codes), from_map,
                              fitted_centre_px=fitted_centre)
@@ -587,6 +581,14 @@ class _Scan(NamedTuple):
     claimed: np.ndarray             # blobs inside a card found
     mirrored: List[np.ndarray]      # homographies of cards read whole but seen in a mirror
     far: np.ndarray                 # the far candidates looked at (cards.far_candidates)
+
+
+def _plane_pixels(H: np.ndarray, xy: np.ndarray, camera: Optional[CameraModel]) -> np.ndarray:
+    """Return the image pixels of plane points ``xy`` (N, 2) through ``H`` and the lens."""
+    px = apply_h(H, xy)
+    if camera is not None and camera.has_distortion:
+        px = camera.distort_pixels(px)
+    return px
 
 
 def _in_image(card: CardDetection, to_image: np.ndarray) -> CardDetection:

@@ -56,6 +56,14 @@ _FAR_FULL_MAX_AREA = 32.0
 # this many faint spots round them (not a crowd, and no bigger dark thing
 # under them) go first: a soft far card's ring shows as a few faint spots.
 _ZOOM_MIN_RING = 3
+# The small blobs looked at for a zoom: from this area (image pixels; a soft
+# far centre can be one decimated pixel), the darkest this many surely ink
+# and as many paler. A clutter's specks are often darker than a soft far
+# centre (in far soft frames, its rank among them was 16-24th), and its
+# faint ring is what tells it (scratch r26/zfeat.py); looking at 96 blobs
+# costs about 1.3 ms (3 at most) in a cluttered frame where no card was read.
+_ZOOM_MIN_AREA = 4.0
+_ZOOM_LOOKS = 48
 
 
 @dataclass(frozen=True)
@@ -219,30 +227,44 @@ def zoom_spots(dot_image: DotImage, config: PatternConfig, claimed: np.ndarray, 
     Where :class:`~.detector.Detector` found no card, these are looked at
     again in a window zoomed and sharpened (:mod:`.zoom`): a far card seen
     through a soft lens, whose dots faded and merged at the image's own
-    scale. Looked at: the darkest ``_FAR_TRIES`` surely ink
-    (:func:`ink_spots`), and those of the darkest ``_FAR_TRIES`` that are not
-    (a soft far centre is paler than ink). First those with
-    ``_ZOOM_MIN_RING`` faint spots round them or more, but not a crowd (a
-    ring too faint or broken for a far candidate), most first; then the
-    others surely ink, darkest first.
+    scale. Looked at: of the blobs from ``_ZOOM_MIN_AREA`` up, the darkest
+    ``_ZOOM_LOOKS`` surely ink (:func:`ink_spots`' test), and those of the
+    darkest ``_ZOOM_LOOKS`` that are not (a soft far centre is paler than
+    ink). Of those, the few of before (from ``_FAR_MIN_AREA`` up, the
+    darkest ``_FAR_TRIES`` of each kind) first: those with ``_ZOOM_MIN_RING``
+    faint spots round them or more, but not a crowd (a ring too faint or
+    broken for a far candidate), most first; then the others of the many
+    that are so ringed, most first; then the few's others surely ink, darkest
+    first; then the many's.
     """
     blobs = dot_image.blobs
     if len(blobs) == 0 or tries < 1:
         return np.zeros(0, dtype=np.intp)
-    idx = np.flatnonzero((blobs.area >= _FAR_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA)
+    idx = np.flatnonzero((blobs.area >= _ZOOM_MIN_AREA) & (blobs.area <= _FAR_FULL_MAX_AREA)
                          & ~claimed)
     if len(idx) == 0:
         return np.zeros(0, dtype=np.intp)
     white, noise, dark, sure = _ink_measures(dot_image, idx)
-    inked = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_FAR_TRIES]]
-    darkest = np.argsort(-dark, kind='stable')[:_FAR_TRIES]
+    inked = np.flatnonzero(sure)[np.argsort(-dark[sure], kind='stable')[:_ZOOM_LOOKS]]
+    darkest = np.argsort(-dark, kind='stable')[:_ZOOM_LOOKS]
     pick = np.concatenate([inked, darkest[~sure[darkest]]])
     ci = idx[pick]
     _, n_ring, own = _faint_rings_round(dot_image, config, ci, white[pick], noise[pick])
     ringed = (n_ring >= _ZOOM_MIN_RING) & (n_ring <= 3 * RING_POINTS) \
         & (own <= 6.0 * blobs.area[ci])
+    # The few once looked at alone (from _FAR_MIN_AREA up, the darkest
+    # _FAR_TRIES of each kind) that faint spots ring go first: the more blobs
+    # looked at, the more a clutter holds one its specks ring more, which
+    # pushed a ringed centre among the few out of the windows (seed 2's
+    # frames). Then the others so ringed, then the rest surely ink, the few
+    # first, darkest first.
+    big = blobs.area[idx] >= _FAR_MIN_AREA
+    few_ink = np.flatnonzero(sure & big)[np.argsort(-dark[sure & big], kind='stable')]
+    few_dark = np.flatnonzero(big)[np.argsort(-dark[big], kind='stable')[:_FAR_TRIES]]
+    few = np.isin(pick, np.concatenate([few_ink[:_FAR_TRIES], few_dark[~sure[few_dark]]]))
+    tier = np.where(ringed, np.where(few, 0, 1), np.where(few, 2, 3))
     looked = np.flatnonzero(ringed | sure[pick])
-    order = looked[np.argsort(np.where(ringed[looked], -n_ring[looked], 0), kind='stable')]
+    order = looked[np.lexsort((np.where(ringed[looked], -n_ring[looked], 0), tier[looked]))]
     return ci[order[:tries]].astype(np.intp)
 
 

@@ -402,12 +402,13 @@ class Detector:
         """
         card, refit = self._read_at(dot_image, guess.homography, camera, mirrored)
         if refit is not None and (card is None or card.ids is None):
-            # The refit dropped dots the guess's windows measured, and the
-            # code was not read: the guess was off by a few tenths of a pixel
-            # (a far card in a zoomed window, its dots a few pixels across),
-            # enough to bias a small dot's centre and colour. Measured again
-            # where the refit puts the dots, once, and taken only if read
-            # whole then (every check of a reading applies again).
+            # No id read: the dots were measured where the grouping put them,
+            # and a far card's dots are a few pixels across (a soft card in a
+            # zoomed window): a few tenths of a pixel off biases a small dot's
+            # colour (point 1's black read as green) and centre (the refit
+            # drops it). Measured again, once, where the homography refitted
+            # to the sub-pixel centres puts them; taken only if it then gives
+            # an id (every check of a reading applies again).
             again, _ = self._read_at(dot_image, refit, camera, mirrored)
             if again is not None and again.ids is not None:
                 return again
@@ -419,8 +420,8 @@ class Detector:
         """
         Measure, read and check the card where ``H`` puts it (see :meth:`_measure_and_read`).
 
-        Also return the refitted homography when the refit dropped dots
-        measured as valid and no mirror was seen (else None).
+        Also return the refitted homography, unless none was fitted or the
+        card was refused as a mirror image (then None).
         """
         cfg, params = self.config, self.params
         n_rings = cfg.n_rings
@@ -437,7 +438,6 @@ class Detector:
             if not any(np.all(ring_valid[r]) for r in range(n_rings)):
                 return None, None
             return self._card(dot_image, camera, H, paper, spots, valid, 0, None, 0.0, ()), None
-        refit = H if np.any(spots.valid & ~valid) else None
         # Colours of the dots kept by the refit, and of those whose inner part
         # is clean though their rim is not (an object beside them).
         readable = valid | (spots.readable & ~spots.valid)
@@ -450,7 +450,7 @@ class Detector:
             if other is not None and (reading is None or reading.code is None):
                 reading = _second_reading(reading, read(other))
         if reading is None:
-            return None, refit
+            return None, H
         valid[list(reading.not_dots)] = False
         handed: Dict[int, str] = {}
 
@@ -469,9 +469,9 @@ class Detector:
                 if handed[reading.point1_slot] == 'mirror':
                     mirrored.append(H)
                     return None, None
-                return None, refit
+                return None, H
             return self._card(dot_image, camera, H, paper, spots, valid, reading.point1_slot,
-                              reading.code, reading.margin, reading.ring_codes), refit
+                              reading.code, reading.margin, reading.ring_codes), H
         # Slots hidden by an object: the one known code that fits, else the
         # few that the slots seen cannot tell apart, for the localizer to
         # choose among by where its last fix puts the robot.
@@ -482,7 +482,7 @@ class Detector:
         if resolved is not None:
             fitting, doubtful = (resolved,), ()
         elif not fitting or len(fitting) + len(doubtful) > params.max_code_candidates:
-            return None, refit
+            return None, H
         options, fits = [], 0
         for k, (code, point1) in enumerate(fitting + doubtful):
             if not mirror_safe(point1):
@@ -494,9 +494,9 @@ class Detector:
                 options.append(card)
                 fits += k < len(fitting)
         if resolved is not None:
-            return (options[0] if options else None), refit
+            return (options[0] if options else None), H
         if fits == 0:
-            return None, refit
+            return None, H
         # One left is still no id: the marks that dropped the others (each
         # with point 1 in another slot) may only have been hidden. But those
         # would turn the card by 45 degrees or more, which the localizer's
@@ -504,7 +504,7 @@ class Detector:
         # ring order unknown, in slot order as a grey image's.
         hidden = self._card(dot_image, camera, H, paper, spots, valid, 0, None, reading.margin,
                             reading.ring_codes, from_map)
-        return dataclasses.replace(hidden, candidates=tuple(options)), refit
+        return dataclasses.replace(hidden, candidates=tuple(options)), H
 
     def _card(self, dot_image: DotImage, camera: Optional[CameraModel], H: np.ndarray,
               paper: Paper, spots: SpotMeasures, valid: np.ndarray, point1: int,

@@ -408,8 +408,13 @@ class Detector:
             # colour (point 1's black read as green) and centre (the refit
             # drops it). Measured again, once, where the homography refitted
             # to the sub-pixel centres puts them; taken only if it then gives
-            # an id (every check of a reading applies again).
+            # an id (every check of a reading applies again). Marks that show
+            # a mirror there refuse the card, even the codes the first read
+            # left to choose among.
+            seen_in_mirror = len(mirrored)
             again, _ = self._read_at(dot_image, refit, camera, mirrored)
+            if len(mirrored) > seen_in_mirror:
+                return None
             if again is not None and again.ids is not None:
                 return again
         return card

@@ -28,7 +28,8 @@ from pattern_locator.vision import detector as detector_module
 from pattern_locator.vision.camera import CameraModel
 from pattern_locator.vision.centres import card_paper, measure_spots
 from pattern_locator.vision.code_reading import read_code, Reading
-from pattern_locator.vision.detector import _second_reading, Detector, DetectorParams
+from pattern_locator.vision.detector import (_second_reading, CardDetection, Detector,
+                                             DetectorParams)
 from pattern_locator.vision.dots import DotImage, segment
 from pattern_locator.vision.zoom import ZOOMED_PIXEL_SIGMA
 import pytest
@@ -262,15 +263,7 @@ def test_soft_far_centre_behind_many_darker_specks_is_zoomed_on_by_its_faint_rin
     # 16th-24th by darkness among the small blobs, or is one decimated pixel,
     # beyond the eight of each kind once looked at; among the 48 looked at
     # now, its faint ring puts it first.
-    from pattern_locator.evaluation import stress
-    from pattern_locator.evaluation.bench import bench_cameras
-    from pattern_locator.vision.locate import CardLocator
-
-    frames = stress.make_frames(CFG, 20, seed, ['far soft'])
-    frame = frames[index]
-    camera = bench_cameras()[frame.camera_name]
-    image = stress.render_frame(frame, camera, CFG, 'dots')
-    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    frame, camera, image, detector = soft_far_frame_with_map(seed, index)
     assert [card.ids for card in detector.detect(image, camera) if card.ids] == [frame.ids]
     monkeypatch.setattr(card_stage, '_ZOOM_LOOKS', 8)
     monkeypatch.setattr(card_stage, '_ZOOM_MIN_AREA', 8.0)
@@ -357,6 +350,20 @@ def test_zoomed_windows_read_no_mirror_image():
         assert [c for c in locator.locate(image, camera) if c.detection.ids is not None] == []
 
 
+def soft_far_frame_with_map(seed, index):
+    """Return a far soft frame of the stress bench, its camera, image and a mapped detector."""
+    from pattern_locator.evaluation import stress
+    from pattern_locator.evaluation.bench import bench_cameras
+    from pattern_locator.vision.locate import CardLocator
+
+    frames = stress.make_frames(CFG, 20, seed, ['far soft'])
+    frame = frames[index]
+    camera = bench_cameras()[frame.camera_name]
+    image = stress.render_frame(frame, camera, CFG, 'dots')
+    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    return frame, camera, image, detector
+
+
 def stress_far_frame(seed, index):
     """Return a far frame of the stress bench, its camera and its image."""
     from pattern_locator.evaluation import stress
@@ -374,15 +381,7 @@ def test_soft_far_card_wholly_in_its_window_may_take_a_slot_from_the_map(seed, i
     # either ring, and the map's codes fill it. A window's edge cuts no dot
     # of this card (all of it lies a dot's width inside), so that slot is
     # unreadable, not cut off: the card is taken. Without the map, no id.
-    from pattern_locator.evaluation import stress
-    from pattern_locator.evaluation.bench import bench_cameras
-    from pattern_locator.vision.locate import CardLocator
-
-    frames = stress.make_frames(CFG, 20, seed, ['far soft'])
-    frame = frames[index]
-    camera = bench_cameras()[frame.camera_name]
-    image = stress.render_frame(frame, camera, CFG, 'dots')
-    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    frame, camera, image, detector = soft_far_frame_with_map(seed, index)
     (card,) = detector.detect(image, camera)
     assert card.ids == frame.ids and card.slots_from_map == 1
     assert not any(found.ids is not None for found in DETECTOR.detect(image, camera))
@@ -396,21 +395,37 @@ def test_soft_far_card_is_measured_again_where_its_refit_puts_its_dots(monkeypat
     # there the code is not read (a dot the refit drops; or, at (24, 38),
     # point 1's black read as green, which its handedness marks refuse).
     # Measured again where the refit puts the dots, the card is read.
-    from pattern_locator.evaluation import stress
-    from pattern_locator.evaluation.bench import bench_cameras
-    from pattern_locator.vision.locate import CardLocator
-
-    frames = stress.make_frames(CFG, 20, seed, ['far soft'])
-    frame = frames[index]
-    camera = bench_cameras()[frame.camera_name]
-    image = stress.render_frame(frame, camera, CFG, 'dots')
-    detector = CardLocator(CFG, known_codes=stress.stress_map(frames, CFG)).detector
+    frame, camera, image, detector = soft_far_frame_with_map(seed, index)
     assert [card.ids for card in detector.detect(image, camera) if card.ids] == [frame.ids]
     # Measured once only, as before: no id.
     monkeypatch.setattr(Detector, '_measure_and_read',
                         lambda self, dot_image, guess, cam, mirrored:
                         self._read_at(dot_image, guess.homography, cam, mirrored)[0])
     assert not any(card.ids is not None for card in detector.detect(image, camera))
+
+
+def test_a_card_whose_marks_show_a_mirror_when_measured_again_is_refused(monkeypatch):
+    # The first reading left mapped codes to choose among; measured again
+    # where its refit puts the dots, the marks show a mirror: no card at
+    # all, not the codes the first reading left.
+    H = np.eye(3)
+    unread = CardDetection(None, None, np.full((17, 2), np.nan), np.full(17, np.nan), (), 10.0,
+                           H, 0.5)
+    first = dataclasses.replace(unread, candidates=(unread, unread))
+    calls = []
+
+    def read_at(self, dot_image, homography, camera, mirrored):
+        calls.append(homography)
+        if len(calls) == 1:
+            return first, 2.0 * H
+        mirrored.append(homography)
+        return None, None
+
+    monkeypatch.setattr(Detector, '_read_at', read_at)
+    guess = card_stage.CardGuess(0, np.full((2, 8), -1), H, None)
+    mirrored = []
+    assert DETECTOR._measure_and_read(None, guess, None, mirrored) is None
+    assert len(calls) == 2 and np.array_equal(calls[1], 2.0 * H) and len(mirrored) == 1
 
 
 def test_a_zoomed_card_the_window_edge_cuts_is_not_held():

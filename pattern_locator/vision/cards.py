@@ -259,9 +259,9 @@ def zoom_spots(dot_image: DotImage, config: PatternConfig, claimed: np.ndarray, 
     # frames). Then the others so ringed, then the rest surely ink, the few
     # first, darkest first.
     big = blobs.area[idx] >= _FAR_MIN_AREA
-    few_ink = np.flatnonzero(sure & big)[np.argsort(-dark[sure & big], kind='stable')]
+    few_ink = np.flatnonzero(sure & big)[np.argsort(-dark[sure & big], kind='stable')[:_FAR_TRIES]]
     few_dark = np.flatnonzero(big)[np.argsort(-dark[big], kind='stable')[:_FAR_TRIES]]
-    few = np.isin(pick, np.concatenate([few_ink[:_FAR_TRIES], few_dark[~sure[few_dark]]]))
+    few = np.isin(pick, np.concatenate([few_ink, few_dark[~sure[few_dark]]]))
     tier = np.where(ringed, np.where(few, 0, 1), np.where(few, 2, 3))
     looked = np.flatnonzero(ringed | sure[pick])
     order = looked[np.lexsort((np.where(ringed[looked], -n_ring[looked], 0), tier[looked]))]
